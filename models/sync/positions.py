@@ -67,6 +67,12 @@ CHUNK = 20000
 CHECKED, UNCHECKED, TOO_FEW, FAILED, NOT_CONVERGED = "checked", "unchecked", "too few", "failed", "not converged"
 #: A fix whose rejected arrival could be swapped for a kept one, both solutions passing the overall test.
 AMBIGUOUS = "ambiguous"
+#: A fix whose arrivals do not determine it (its normal matrix singular: the receivers that heard it all at one
+#: place, or in a line through it in 2-D): its position undetermined in some direction, not trusted.
+UNDETERMINED = "undetermined"
+#: A normal matrix scaled to a unit diagonal is taken as singular where its smallest eigenvalue is below this share
+#: of its largest (a condition number beyond 10¹²: float64 keeps 16 digits, a step or an inverse keeps none).
+RCOND = 1e-12
 
 
 @dataclass
@@ -89,6 +95,54 @@ class Fixes:
     variance_factor: np.ndarray | None = None
     status: np.ndarray | None = None
     rejected: np.ndarray | None = None
+
+
+def _scaled_pinv(m: np.ndarray) -> np.ndarray:
+    """(N, k, k) the pseudo-inverse of each symmetric matrix of a stack, scaled to a unit diagonal first (Jacobi:
+    the position's metres and the emission time's seconds differ by the slowness, 10³), its eigenvalues below
+    :data:`RCOND` of the largest left out (a rank-revealing inverse: Golub & Van Loan 2013, *Matrix Computations*,
+    4th ed., § 5.5): a direction the arrivals do not determine gets no step; NaN where a matrix is not finite."""
+    m = np.asarray(m, float)
+    finite = np.isfinite(m).all(axis=(1, 2))
+    m = np.where(finite[:, None, None], m, np.eye(m.shape[1]))
+    d = np.sqrt(np.abs(np.diagonal(m, axis1=1, axis2=2)))
+    d = np.where(d > 0, d, 1.0)
+    scale = d[:, :, None] * d[:, None, :]
+    inverse = np.linalg.pinv(m / scale, rcond=RCOND, hermitian=True) / scale
+    return np.where(finite[:, None, None], inverse, np.nan)
+
+
+def _solve(m: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``m⁻¹ rhs`` for a stack of normal matrices ``m`` (N, k, k) and ``rhs`` (N, k, 1): LU where every matrix is
+    regular, else by :func:`_scaled_pinv` (the minimum-norm step: degenerate geometry, e.g. receivers in degrees,
+    never stops the fix)."""
+    try:
+        return np.linalg.solve(m, rhs)
+    except np.linalg.LinAlgError:
+        return np.matmul(_scaled_pinv(m), rhs)
+
+
+def _inverse(m: np.ndarray) -> np.ndarray:
+    """The inverse of each matrix of a stack (N, k, k): LU where every one is regular, else :func:`_scaled_pinv`."""
+    try:
+        return np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        return _scaled_pinv(m)
+
+
+def _determined(m: np.ndarray) -> np.ndarray:
+    """(N,) bool: each normal matrix (N, k, k) regular once scaled to a unit diagonal (its condition number below
+    1 / :data:`RCOND`)."""
+    if not len(m):
+        return np.zeros(0, bool)
+    m = np.asarray(m, float)
+    finite = np.isfinite(m).all(axis=(1, 2))
+    m = np.where(finite[:, None, None], m, 0.0)
+    d = np.sqrt(np.abs(np.diagonal(m, axis1=1, axis2=2)))
+    good = finite & (d > 0).all(axis=1)
+    d = np.where(d > 0, d, 1.0)
+    eig = np.linalg.eigvalsh(m / (d[:, :, None] * d[:, None, :]))
+    return good & (eig[:, 0] > RCOND * eig[:, -1])
 
 
 def _jacobian(p, receivers, slowness):
@@ -116,7 +170,7 @@ def _gauss_newton(a, mask, receivers, sigma, slowness, p, T, robust: bool):
         w = ba * (NU + 1) / (NU + residual ** 2 * ba) if robust else ba
         Jw = J * w[..., None]
         info = np.matmul(Jw.transpose(0, 2, 1), J) + 1e-12 * np.eye(dim + 1)
-        step = np.linalg.solve(info, np.matmul(Jw.transpose(0, 2, 1), residual[..., None]))[..., 0]
+        step = _solve(info, np.matmul(Jw.transpose(0, 2, 1), residual[..., None]))[..., 0]
         m = np.linalg.norm(step[:, :dim], axis=1)
         m = np.where(np.isfinite(m), m, np.inf)
         shrink = np.minimum(1.0, MAX_STEP / np.maximum(m, 1e-12))
@@ -160,7 +214,7 @@ def _w_statistics(residual: np.ndarray, J: np.ndarray, mask: np.ndarray, sigma: 
     white = np.where(mask, 1.0 / sigma[None, :], 0.0)
     A = J * white[..., None]
     N = np.einsum("nrk,nrl->nkl", A, A) + 1e-12 * np.eye(J.shape[2])
-    h = np.einsum("nrk,nkl,nrl->nr", A, np.linalg.inv(N), A)
+    h = np.einsum("nrk,nkl,nrl->nr", A, _inverse(N), A)
     return np.where(mask, residual * white / np.sqrt(np.clip(1.0 - h, 1e-12, None)), 0.0)
 
 
@@ -225,9 +279,9 @@ def _not_separable(a, heard, mask, receivers, sigma, slowness, p, T, info, facto
                                              T[pair_e], robust=False)
     chi2 = np.where(swap, (residual / sigma[None, :]) ** 2, 0.0).sum(axis=1)
     passes = (move < CONVERGED) & (chi2 <= chdtri(redundancy[pair_e], TEST_SIZE))
-    cov = np.linalg.inv(info[pair_e] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[pair_e, None, None]
+    cov = _inverse(info[pair_e] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[pair_e, None, None]
     d = q - p[pair_e]
-    far = np.einsum("nk,nkl,nl->n", d, np.linalg.inv(cov), d) > chdtri(dim, TEST_SIZE)
+    far = np.einsum("nk,nkl,nl->n", d, _inverse(cov), d) > chdtri(dim, TEST_SIZE)
     out = np.zeros(E, bool)
     out[pair_e[passes & far]] = True
     return out
@@ -342,10 +396,12 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     status[redundancy == 0] = UNCHECKED
     status[redundancy < 0] = TOO_FEW
     status[(redundancy >= 0) & ~((move < CONVERGED) & np.isfinite(p).all(axis=1))] = NOT_CONVERGED
+    checked = np.flatnonzero(status == CHECKED)
+    status[checked[~_determined(info[checked])]] = UNDETERMINED
     ok = status == CHECKED
     covariance = np.full((E, dim, dim), np.nan)
     if ok.any():
-        covariance[ok] = np.linalg.inv(info[ok] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[ok, None, None]
+        covariance[ok] = _inverse(info[ok] + 1e-12 * np.eye(dim + 1))[:, :dim, :dim] * factor[ok, None, None]
     p, T = p.copy(), T.copy()
     p[~ok] = np.nan
     T[~ok] = np.nan
@@ -356,4 +412,4 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
 
 
 __all__ = ["AMBIGUOUS", "CHECKED", "CHUNK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP", "NOT_CONVERGED", "NU",
-           "TEST_SIZE", "TOO_FEW", "UNCHECKED", "W_CRITICAL", "position_emissions"]
+           "RCOND", "TEST_SIZE", "TOO_FEW", "UNCHECKED", "UNDETERMINED", "W_CRITICAL", "position_emissions"]

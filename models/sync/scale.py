@@ -14,8 +14,21 @@ first tag's emissions) cancels the offsets: the **double difference** ``((d_uB �
 receivers and tag gives one, its median over the emissions; the table predicts the same from its positions. Their
 ratio (:func:`distance_scale`: the median over the items whose predicted value is among the larger half) is 1 for a
 table in metres (within the sync tags' hanging, the depths and the sound speed: percent), about 1,000 for one in
-kilometres and about 10⁵ for degrees (a degree of latitude is 111 km); beyond :data:`SCALE_LIMIT` either way the
-table is refused (:func:`check_scale`) naming the unit it looks like (:func:`likely_unit`).
+kilometres, 0.3048 for feet and about 10⁵ for degrees (a degree of latitude is 111 km).
+
+Where the times are rounded (a whole second, a tenth: ``quantum``), one double difference is a sum of four
+roundings and its median over the emissions is itself rounded, off by up to half a quantum (a whole second's
+median of zero says the receivers are at one place); their **mean** is not, the roundings being uniform over the
+quantum whatever the clocks (a dithered quantiser: Widrow & Kollár, *Quantization Noise*, Cambridge University
+Press 2008, ch. 19), so where an item's spread is within the quantum its mean within :data:`TRIM` quanta of its
+median is taken instead.
+
+The ratio is judged by the sound speed it implies (:func:`check_scale`): the table's distances are right at the
+speed ``c / scale`` (``c`` the speed the double differences were taken at). Water's speed lies within
+:data:`SPEED_TOLERANCE` (7 %) of :data:`NOMINAL_SOUND_SPEED`, 1,376–1,584 m/s (fresh water near freezing to a warm
+sea); a table needing a speed beyond that by more than :data:`REFUSE_FACTOR` is refused naming the unit it looks like
+(:func:`likely_unit`: feet, yards, kilometres, degrees, ...), one within it is said in a warning line; a speed given
+by the user that the travel times contradict by more than :data:`SPEED_TOLERANCE` is said too.
 
 Units: seconds [s], metres [m] (the table's unit, whatever it is).
 """
@@ -28,8 +41,15 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 
-#: The largest factor between the table's distances and the travel times' before the table is refused (either way).
-SCALE_LIMIT = 10.0
+#: The water's typical sound speed [m/s], the speed the double differences are taken at where none is given.
+NOMINAL_SOUND_SPEED = 1480.0
+#: The water's sound speed lies within this share of :data:`NOMINAL_SOUND_SPEED` (1,376–1,584 m/s).
+SPEED_TOLERANCE = 0.07
+#: A table whose distances need a sound speed beyond the water's range by more than this factor is refused; within
+#: it, said (a 2-D table of receivers at very different depths, yards in warm water).
+REFUSE_FACTOR = 1.25
+#: Where the times are rounded: an item's double differences within this many quanta of their median are averaged.
+TRIM = 4.0
 #: The fewest emissions of one tag a pair of receivers must share for its double differences.
 MIN_EMISSIONS = 3
 #: The fewest double differences (pairs of receivers and tags) a scale is given on; fewer: no check.
@@ -53,8 +73,19 @@ class Scale:
     table_m: float
 
 
+def _centre(values: np.ndarray, quantum: float) -> float:
+    """An item's double difference [s] from its values over the emissions: their median, or where the times are
+    rounded to ``quantum`` [s] and the values spread no wider than it, their mean within :data:`TRIM` quanta of the
+    median (the module docstring)."""
+    middle = float(np.median(values))
+    if quantum <= 0 or float(np.median(np.abs(values - middle))) > quantum:
+        return middle
+    return float(np.mean(values[np.abs(values - middle) <= TRIM * quantum]))
+
+
 def double_differences(receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, time: np.ndarray,
-                       distance: np.ndarray, sound_speed: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       distance: np.ndarray, sound_speed: float, quantum: float = 0.0
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The clock-free double differences of the sync tags' arrivals and the table's (module docstring).
 
     Parameters
@@ -67,11 +98,13 @@ def double_differences(receiver: np.ndarray, tag: np.ndarray, emission: np.ndarr
         [m] the table's distance from the arrival's tag to its receiver.
     sound_speed : float
         [m/s].
+    quantum : float
+        [s] the times' rounding (:func:`sblsim.models.sync.resolution.time_quantum`; 0: none).
 
     Returns
     -------
     acoustic : ndarray, (k,)
-        [m] each double difference's median times the sound speed.
+        [m] each double difference's median (or mean, where rounded: the module docstring) times the sound speed.
     table : ndarray, (k,)
         [m] the table's value of each.
     pair : ndarray of int, (k,)
@@ -127,7 +160,7 @@ def double_differences(receiver: np.ndarray, tag: np.ndarray, emission: np.ndarr
             if inside.sum() < MIN_EMISSIONS:
                 continue
             dd = sd[mine][other][inside] - np.interp(tu[inside], t_ref, sd_ref)
-            acoustic.append(float(np.median(dd)) * sound_speed)
+            acoustic.append(_centre(dd, quantum) * sound_speed)
             table.append(float(np.median(g[mine][other])) - g_ref)
             pairs.append(int(key[a]))
     return np.array(acoustic), np.array(table), np.array(pairs, np.int64)
@@ -166,48 +199,83 @@ def looks_like_degrees(x: np.ndarray, y: np.ndarray) -> bool:
     return bool(np.abs(x).max() <= 180.0 and np.abs(y).max() <= 90.0 and spread < 1.0 and centre > spread)
 
 
+#: The units a receivers table may be in by mistake: the factor of their distances to metres' (the double
+#: differences' scale, :func:`distance_scale`) and how far in log10 a scale may be from it to be named (near 1 the
+#: water's sound speed, ±7 %, and the estimate's spread; far from it an order of magnitude's half).
+UNITS = {"kilometres": (1e3, 0.3), "centimetres": (1e-2, 0.3), "millimetres": (1e-3, 0.3),
+         "feet": (0.3048, 0.06), "yards": (0.9144, 0.06)}
+
+
 def likely_unit(scale: float, degrees: bool) -> str:
-    """The unit a table seems to be in, given the factor ``scale`` its distances are below the travel times' and
-    whether its values look like degrees (:func:`looks_like_degrees`)."""
+    """The unit a table seems to be in, given the factor ``scale`` its distances are below the travel times' (at
+    :data:`NOMINAL_SOUND_SPEED`) and whether its values look like degrees (:func:`looks_like_degrees`): the nearest
+    of :data:`UNITS` within its reach, else the factor."""
     if not np.isfinite(scale) or scale <= 0:
         return "not metres (the travel times do not follow the table's distances)"
     if degrees and scale > 1e4:
         return "degrees (latitude and longitude)"
-    named = {1e3: "kilometres", 1e-2: "centimetres", 1e-3: "millimetres", 3.28084e-1: "feet"}
-    for factor, name in named.items():
-        if abs(np.log10(scale / factor)) < 0.3:
-            return name
-    return f"metres × {1.0 / scale:.3g}"
+    off = {name: abs(np.log10(scale / factor)) for name, (factor, _) in UNITS.items()}
+    name = min(off, key=off.get)
+    return name if off[name] < UNITS[name][1] else f"metres × {1.0 / scale:.3g}"
 
 
-def check_scale(found: Scale | None, where: str, x: np.ndarray, y: np.ndarray, allowed: str) -> None:
-    """Refuse a receivers table whose distances differ from the travel times' by more than :data:`SCALE_LIMIT`.
+def check_scale(found: Scale | None, where: str, x: np.ndarray, y: np.ndarray, allowed: str,
+                sound_speed: float = NOMINAL_SOUND_SPEED, given: bool = False) -> str | None:
+    """Judge a receivers table's distances by the sound speed the travel times need of them (module docstring).
 
     Parameters
     ----------
     found : Scale or None
-        :func:`distance_scale`'s (None: nothing to check).
+        :func:`distance_scale`'s (None: too few double differences; a table of degrees refused all the same).
     where : str
         The declaration the message names (e.g. the receivers file).
     x, y : ndarray
         The table's coordinates (for :func:`looks_like_degrees`).
     allowed : str
         What the message allows.
+    sound_speed : float
+        [m/s] the speed the double differences were taken at.
+    given : bool
+        Whether the user gave that speed (a constant or a series; else :data:`NOMINAL_SOUND_SPEED`).
+
+    Returns
+    -------
+    str or None
+        One warning line: the speed the table needs outside the water's range within :data:`REFUSE_FACTOR`, or a
+        given speed it contradicts by more than :data:`SPEED_TOLERANCE`; else None.
 
     Raises
     ------
     ModelError
-        One line naming ``where``, the factor, the distances by sound and by the table, the unit the table looks
-        like, and ``allowed``.
+        One line naming ``where``, the factor, the distances by sound and by the table, the speed they need, the unit
+        the table looks like, and ``allowed``; or, with no double difference to judge by, a table of degrees.
     """
-    if found is None or 1.0 / SCALE_LIMIT <= found.scale <= SCALE_LIMIT:
-        return
-    unit = likely_unit(found.scale, looks_like_degrees(x, y))
-    raise ModelError(f"{where}: the sync tags' travel times put the receivers {found.scale:.4g} times as far apart "
-                     f"as the positions do (median {found.acoustic_m:.4g} m by sound, {found.table_m:.4g} by the "
-                     f"table, over {found.pairs} pairs of receivers, clock-free); the positions look like {unit}; "
-                     f"allowed: {allowed}")
+    degrees = looks_like_degrees(x, y)
+    if found is None:
+        if degrees:
+            raise ModelError(f"{where}: the positions span less than a unit around ({np.mean(x):.6g}, "
+                             f"{np.mean(y):.6g}): they look like degrees (latitude and longitude); allowed: {allowed}")
+        return None
+    low, high = NOMINAL_SOUND_SPEED * (1 - SPEED_TOLERANCE), NOMINAL_SOUND_SPEED * (1 + SPEED_TOLERANCE)
+    needed = sound_speed / found.scale if found.scale > 0 else np.inf
+    told = (f"the sync tags' travel times put the receivers {found.scale:.4g} times as far apart as the positions do "
+            f"(median {found.acoustic_m:.4g} m by sound at {sound_speed:.4g} m/s, {found.table_m:.4g} by the table, "
+            f"over {found.pairs} pairs of receivers, clock-free: the table's distances need a sound speed of "
+            f"{needed:.4g} m/s, the water's is {low:.0f}-{high:.0f})")
+    if np.isfinite(needed) and low <= needed <= high:
+        if given and abs(needed / sound_speed - 1) > SPEED_TOLERANCE:
+            return (f"{where}: the sync tags' travel times fit the table's distances at {needed:.4g} m/s, not at the "
+                    f"{sound_speed:.4g} m/s given ({100 * abs(needed / sound_speed - 1):.3g} % apart, over "
+                    f"{found.pairs} pairs of receivers, clock-free): the sound speed given, or the positions' unit, "
+                    "is off")
+        return None
+    unit = likely_unit(NOMINAL_SOUND_SPEED / needed if np.isfinite(needed) else 0.0, degrees)
+    if np.isfinite(needed) and low / REFUSE_FACTOR <= needed <= high * REFUSE_FACTOR:
+        depths = ", or the receivers' depths missing (a 2-D table)" if needed < low else ""
+        return f"{where}: {told}; the positions may be in {unit}{depths}"
+    raise ModelError(f"{where}: {told}; the positions look like {unit}; allowed: {allowed}")
 
 
-__all__ = ["MAX_BRIDGE", "MAX_PAIRS", "MIN_EMISSIONS", "MIN_ITEMS", "SCALE_LIMIT", "Scale", "check_scale",
-           "distance_scale", "double_differences", "likely_unit", "looks_like_degrees"]
+__all__ = ["MAX_BRIDGE", "MAX_PAIRS", "MIN_EMISSIONS", "MIN_ITEMS", "NOMINAL_SOUND_SPEED", "REFUSE_FACTOR",
+           "SPEED_TOLERANCE", "Scale", "TRIM", "UNITS", "check_scale", "distance_scale", "double_differences",
+           "likely_unit", "looks_like_degrees"]

@@ -1,6 +1,6 @@
 """What a user declares about a telemetry study, checked against its detections at the first command that sees
-both: the receivers' positions against the sync tags' travel times (``sblsim sync``:
-:mod:`sblsim.models.sync.scale`), and against the spread of one tag's arrivals (``sblsim toa``); a stated stable
+both: the receivers' positions against the sync tags' travel times (``sblsim sync``, before its clocks are
+fitted: :mod:`sblsim.models.sync.scale`), and against the spread of one tag's arrivals (``sblsim toa``); a stated stable
 burst interval against the tag's pings (``sblsim toa``: :func:`sblsim.models.tracking.strays.stable_interval`).
 """
 
@@ -11,12 +11,17 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.pings import group_pings
-from sblsim.models.sync.scale import check_scale, distance_scale, double_differences, looks_like_degrees
+from sblsim.models.sync.scale import (
+    NOMINAL_SOUND_SPEED,
+    Scale,
+    check_scale,
+    distance_scale,
+    double_differences,
+    looks_like_degrees,
+)
 from sblsim.models.tracking.strays import stable_interval
 from sblsim.orchestrator.readers.transmitters import match
 
-#: The sound speed the scale check takes where none is given [m/s] (the check allows a factor of ten).
-NOMINAL_SOUND_SPEED = 1480.0
 #: What a refusal of the receivers' positions allows.
 ALLOWED = ("positions in metres (x_m, y_m in a local frame or a projected CRS), or latitude and longitude as lat, "
            "lon columns (or --crs for the table's CRS)")
@@ -27,29 +32,24 @@ SPREAD_FACTOR = 1.5
 PROBE_WINDOW = 5.0
 
 
-def check_sync_positions(residuals: pd.DataFrame, receivers: pd.DataFrame, table: pd.DataFrame, source: str,
-                         sound_speed: float | None) -> None:
-    """Refuse a receivers table whose distances the sync tags' travel times contradict by more than ten times
-    (:mod:`sblsim.models.sync.scale`: clock-free double differences of the raw arrivals).
+def sync_scale(residuals: pd.DataFrame, receivers: pd.DataFrame, table: pd.DataFrame, sound_speed: float | None,
+               quantum: float = 0.0) -> Scale | None:
+    """The factor between the sync tags' clock-free travel times and a receivers table's distances
+    (:mod:`sblsim.models.sync.scale`: double differences of the raw arrivals), or None where too few.
 
     Parameters
     ----------
     residuals : pandas.DataFrame
-        A synchronisation's ``residuals.csv``: ``receiver``, ``tag``, ``emission``, ``time`` (raw [s]) and
-        ``reason`` (``multipath`` left out).
+        The sync tags' arrivals (a synchronisation's ``residuals.csv``): ``receiver``, ``tag``, ``emission``,
+        ``time`` (raw [s]) and ``reason`` (``multipath`` left out).
     receivers : pandas.DataFrame
         Its receivers: ``receiver``, ``sync_tag`` (each tag's home).
     table : pandas.DataFrame
         The receivers as the table gives them (never refined): ``receiver``, ``x``, ``y``, ``z`` [m; z NaN: 2-D].
-    source : str
-        The receivers file (for the message).
     sound_speed : float or None
-        [m/s] the one given, else :data:`NOMINAL_SOUND_SPEED`.
-
-    Raises
-    ------
-    ModelError
-        One line naming the file, the factor, the unit the positions look like and what is allowed.
+        [m/s] the one given (a series' median), else :data:`NOMINAL_SOUND_SPEED`.
+    quantum : float
+        [s] the times' rounding (:func:`sblsim.models.sync.resolution.time_quantum`; 0: none).
     """
     use = residuals[residuals["reason"] != "multipath"]
     names = table["receiver"].tolist()
@@ -62,7 +62,7 @@ def check_sync_positions(residuals: pd.DataFrame, receivers: pd.DataFrame, table
             home[found] = index.get(name)
     use = use[use["tag"].map(lambda t: home.get(t) is not None) & use["receiver"].isin(index)]
     if not len(use):
-        return
+        return None
     xyz = table[["x", "y", "z"]].to_numpy(float)
     positions = xyz if np.isfinite(xyz[:, 2]).all() else xyz[:, :2]
     receiver = use["receiver"].map(index).to_numpy(np.int64)
@@ -72,9 +72,39 @@ def check_sync_positions(residuals: pd.DataFrame, receivers: pd.DataFrame, table
     distance = np.linalg.norm(positions[homes[tag]] - positions[receiver], axis=1)
     acoustic, predicted, pair = double_differences(receiver, tag, use["emission"].to_numpy(np.int64),
                                                    use["time"].to_numpy(float), distance,
-                                                   sound_speed or NOMINAL_SOUND_SPEED)
-    check_scale(distance_scale(acoustic, predicted, pair), f"receivers {source!r}", table["x"].to_numpy(float),
-                table["y"].to_numpy(float), ALLOWED)
+                                                   sound_speed or NOMINAL_SOUND_SPEED, quantum)
+    return distance_scale(acoustic, predicted, pair)
+
+
+def check_sync_positions(found: Scale | None, table: pd.DataFrame, source: str, sound_speed: float | None
+                         ) -> str | None:
+    """Refuse a receivers table whose distances need a sound speed the water cannot have, or say it where the
+    contradiction is small (:func:`~sblsim.models.sync.scale.check_scale` on :func:`sync_scale`'s ``found``).
+
+    Parameters
+    ----------
+    found : Scale or None
+        :func:`sync_scale`'s.
+    table : pandas.DataFrame
+        The receivers as the table gives them: ``x``, ``y`` [m].
+    source : str
+        What the message names: the receivers file (``receivers 'file.csv'``).
+    sound_speed : float or None
+        [m/s] the one given (a series' median), else None (:data:`NOMINAL_SOUND_SPEED` taken).
+
+    Returns
+    -------
+    str or None
+        A warning line, or None.
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the factor, the speed it needs, the unit the positions look like and what is
+        allowed; a table of degrees where no double difference weighs it.
+    """
+    return check_scale(found, source, table["x"].to_numpy(float), table["y"].to_numpy(float), ALLOWED,
+                       sound_speed or NOMINAL_SOUND_SPEED, sound_speed is not None)
 
 
 def check_matrix(toa: np.ndarray, positions: np.ndarray, shortest: float, crossing: float, tolerance: float,
@@ -144,4 +174,4 @@ def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float,
 
 
 __all__ = ["ALLOWED", "NOMINAL_SOUND_SPEED", "PROBE_WINDOW", "SPREAD_FACTOR", "check_arrival_spread", "check_matrix",
-           "check_sync_positions"]
+           "check_sync_positions", "sync_scale"]

@@ -35,11 +35,15 @@ from sblsim.models.sync.clocks import Geometry
 from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.noise import receiver_noise
+from sblsim.models.sync.pings import largest_travel_time
+from sblsim.models.sync.resolution import check_resolution, residual_warning, time_quantum
+from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
+from sblsim.orchestrator.sync.declared import check_sync_positions, sync_scale
 from sblsim.orchestrator.sync.refined_positions import _identify, _positions
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
 
@@ -114,8 +118,16 @@ def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) 
 def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
-                survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None) -> SyncOutcome:
+                survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
+                receivers_file: str | None = None) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
+
+    Before the clocks are fitted (once the sync tags' arrivals are grouped into emissions) the times' rounding is
+    weighed against the array (:func:`sblsim.models.sync.resolution.check_resolution`: refused where it leaves
+    nothing to fit) and the table's distances against the sync tags' clock-free travel times
+    (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`: refused in another unit, said where slightly
+    off, naming ``receivers_file``); after, a rounding that is the larger part of the residuals is said
+    (:func:`~sblsim.models.sync.resolution.residual_warning`).
 
     With ``refine_positions`` the receivers' positions are refined only where the sync tags determine them
     (:mod:`sblsim.models.sync.identifiability`: the others keep the table's, ``positions.csv``'s ``reason``), and
@@ -148,6 +160,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
+    receivers_file : str, optional
+        The receivers file the table was read from, named where its positions are refused or said (None: "receivers").
 
     Returns
     -------
@@ -157,14 +171,17 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     ------
     ModelError
         No sync tag heard by two receivers, a reference receiver not in the table or not synchronisable; with
-        ``refine_positions``, no receiver's position determined by the sync tags (a sparse sync array).
+        ``refine_positions``, no receiver's position determined by the sync tags (a sparse sync array); times rounded
+        too coarsely for the array, a table in another unit than metres (one line each, before the clocks are
+        fitted).
     """
     started = clock.perf_counter()
     args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
     if not refine_positions:
-        return _synchronise(*args, timings=timings)
-    refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings)
-    table = _synchronise(*args, table_sigma=survey_sigma)
+        return _synchronise(*args, timings=timings, receivers_file=receivers_file)
+    refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings,
+                           receivers_file=receivers_file)
+    table = _synchronise(*args, table_sigma=survey_sigma, receivers_file=receivers_file)
     outcome = _kept(refined, table, float(survey_sigma))
     outcome.summary["wall_time_s"] = clock.perf_counter() - started
     return outcome
@@ -210,7 +227,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                  reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
-                 table_sigma: float | None = None) -> SyncOutcome:
+                 table_sigma: float | None = None, receivers_file: str | None = None) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
     as :func:`synchronise` (its parameters, ``table_sigma`` aside).
@@ -280,6 +297,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     dim = 3 if np.isfinite(xyz[:, 2]).all() else 2
     positions = xyz[:, :dim]
     distance = np.linalg.norm(positions[tag_home[tag]] - positions[receiver], axis=1)
+    # said or refused before the work: the table's unit and the times' rounding
+    notes_first = _checks(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver, tag,
+                          emission, duplicate, positions, sound_speed, series)
 
     if sound_speed is not None:
         slowness = np.full(len(time), 1.0 / sound_speed)
@@ -371,6 +391,10 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)
+    rounded = residual_warning([time_quantum(time[receiver == j] + origin) for j in range(n_receivers)], noise.noise,
+                               names, 1.0 / float(np.median(emission_slowness)), f"detections {detections.source!r}")
+    if notes_first or rounded:  # said first: the table's unit, the rounding
+        summary["warnings"] = notes_first + ([rounded] if rounded else []) + summary.get("warnings", [])
     summary["clock_breaks"] = segments.breaks_summary(fit, names, origin, _resets(detections, sync))
     for entry in summary["clock_breaks"]:  # each named in one line (the command prints the warnings)
         summary.setdefault("warnings", []).append(segments.break_line(entry))
@@ -410,6 +434,34 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                                "positions the table's (the clocks fitted with every receiver at the survey's prior)"}
         summary["wall_time_s"] = clock.perf_counter() - started
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
+
+
+def _checks(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receivers_file: str | None, names: list[str],
+            tag_names: list[str], receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, duplicate: np.ndarray,
+            positions: np.ndarray, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None
+            ) -> list[str]:
+    """The checks before the clocks are fitted (:func:`synchronise`'s docstring) on the sync tags' arrivals
+    (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo), at the sound speed given (a
+    series' median), else the water's nominal: the table's distances weighed against the travel times (a table of
+    degrees too small to weigh refused first), the times' rounding against the travel time across the array (the
+    table's at the travel times' own scale: a table in another unit is never taken for a rounding), then the
+    table's verdict, naming ``receivers_file`` (None: the receivers). Returns the lines said (a table slightly
+    off)."""
+    times = sync["time"].to_numpy(float)
+    given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
+    speed = given or NOMINAL_SOUND_SPEED
+    arrivals = pd.DataFrame({"receiver": np.array(names, dtype=object)[receiver],
+                             "tag": np.array(tag_names, dtype=object)[tag], "emission": emission, "time": times,
+                             "reason": np.where(duplicate, "multipath", "")})
+    found = sync_scale(arrivals, hydrophones, hydrophones, given, time_quantum(times))
+    where = "receivers" if receivers_file is None else f"receivers {receivers_file!r}"
+    if found is None:
+        check_sync_positions(None, hydrophones, where, given)
+    factor = found.scale if found is not None and found.scale > 0 else 1.0
+    check_resolution(times, largest_travel_time(positions[np.unique(receiver)], speed) * factor, speed,
+                     f"detections {source!r}")
+    said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
+    return [said] if said else []
 
 
 def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int], dict]:

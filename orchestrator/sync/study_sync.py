@@ -1,8 +1,8 @@
 """``sblsim sync`` on a study's files: the raw detections, the receivers' deployments and a sound-speed series read,
 each detection put at its deployment and the clocks synchronised (:func:`synchronise_study`, on
-:func:`~sblsim.orchestrator.sync.run.synchronise`), the detections' time resolution checked against the array
-(:func:`rounding_warning`) and the table's positions against the sync tags' clock-free travel times
-(:func:`synchronise_files`).
+:func:`~sblsim.orchestrator.sync.run.synchronise`, which weighs the times' rounding and, from
+:func:`synchronise_files`, the table's positions against the sync tags' clock-free travel times before it fits the
+clocks); a matrix's or a study's detections' time resolution against the array (:func:`rounding_warning`).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import pandas as pd
 
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning
+from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections, read_detections
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
-from sblsim.orchestrator.sync.declared import check_sync_positions
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
 
 
@@ -27,7 +27,7 @@ def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_sp
     """One line where the detections' times are rounded too coarsely for the array
     (:func:`sblsim.models.sync.resolution.resolution_warning`; ``hydrophones``' ``x``, ``y``, ``z`` [m] give the
     largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None."""
-    speed = sound_speed or 1480.0
+    speed = sound_speed or NOMINAL_SOUND_SPEED
     xyz = np.nan_to_num(hydrophones[["x", "y", "z"]].to_numpy(float))  # a depth not given: the horizontal alone
     return resolution_warning(detections.frame["time"].to_numpy(float), largest_travel_time(xyz, speed), speed,
                               f"detections {detections.source!r}")
@@ -52,10 +52,6 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
                           **options)
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
-    line = rounding_warning(assigned.detections, assigned.hydrophones, outcome.summary["sound_speed"].get(
-        "sound_speed_m_s"))
-    if line:  # times rounded so coarsely that the clocks and every position from them are poor
-        outcome.summary.setdefault("warnings", []).append(line)
     frame = deployments.frame
     if outcome.positions is not None and frame is not None:
         outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
@@ -69,25 +65,25 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
                       frame: str | None = None) -> SyncOutcome:
     """``sblsim sync``'s synchronisation from its files (:func:`sblsim.orchestrator.commands.sync.sync`'s arguments,
     checked): the detections read (in ``format``; None: from the file's first line), the deployments (in ``crs``,
-    projected to ``frame``) and the sound-speed series where given, synchronised (:func:`synchronise_study`), then
-    the table's positions checked against the sync tags' clock-free travel times
-    (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`).
+    projected to ``frame``) and the sound-speed series where given, synchronised (:func:`synchronise_study`), the
+    table's positions checked against the sync tags' clock-free travel times first
+    (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`, once the arrivals are grouped, before the
+    clocks are fitted).
 
     Raises
     ------
     ModelError, ConfigError
         One line: a file refused by its reader, a synchronisation that cannot be made, the table's positions in
-        kilometres or degrees.
+        another unit than metres (feet, kilometres, degrees, ...), times rounded too coarsely for the array.
     """
     data = read_detections(detections, format)
     deployments = read_deployments(receivers, crs, frame)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
-    outcome = synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
-                                refine_positions=refine_positions, survey_sigma=survey_sigma)
-    # the table's positions against the sync tags' clock-free travel times: kilometres or degrees refused
-    check_sync_positions(outcome.residuals, outcome.receivers, deployments.hydrophones(), deployments.source,
-                         sound_speed)
-    return outcome
+    # the table's positions against the sync tags' clock-free travel times (another unit refused, a table slightly
+    # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)
+    return synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
+                             refine_positions=refine_positions, survey_sigma=survey_sigma,
+                             receivers_file=deployments.source)
 
 
 

@@ -320,12 +320,13 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     assert 1.5 <= np.mean(means) <= 4.5, means
 
 
-def test_whole_second_times_are_said_in_one_line_and_milliseconds_not(tmp_path, capsys):
-    """A small simulated array (6 receivers, 3 h) exported with whole seconds: ``sync`` says so in one warning line
-    naming the file and the rounding (1 s); the same times to the millisecond: no such line."""
+def test_whole_second_times_are_refused_in_one_line_and_milliseconds_synchronised(tmp_path, capsys):
+    """A small simulated array (6 receivers, 3 h) exported with whole seconds: ``sync`` refuses it in one line
+    naming the file and the rounding (1 s) as the cause, exit status 2 (tests/orchestrator/test_sync_whole_seconds.py
+    has the cases); the same times to the millisecond are synchronised (exit 0), no refusal."""
     sim = simulate_sync(n_receivers=6, hours=3.0, seed=5, offset=0.5, drift=5e-6, interval=(540.0, 660.0),
                         noise=0.15e-3, echo_share=0.0)
-    lines = {}
+    codes, lines = {}, {}
     for name, digits in (("whole", 0), ("ms", 3)):
         folder = tmp_path / name
         folder.mkdir()
@@ -336,8 +337,9 @@ def test_whole_second_times_are_said_in_one_line_and_milliseconds_not(tmp_path, 
             table["epo"] += table["frac"].astype(float).astype(int)
             table["frac"] = "0"
         table.to_csv(detections, index=False)
-        main(["sync", str(detections), "--receivers", str(hydrophones), "--sound-speed", f"{sim.sound_speed}",
-              "--out", str(folder / "out")])
-        lines[name] = [line for line in capsys.readouterr().err.splitlines() if "whole multiple" in line]
-    assert len(lines["whole"]) == 1 and "every time is a whole multiple of 1 s" in lines["whole"][0]
-    assert "detections.csv" in lines["whole"][0] and lines["ms"] == []
+        codes[name] = main(["sync", str(detections), "--receivers", str(hydrophones), "--sound-speed",
+                            f"{sim.sound_speed}", "--out", str(folder / "out")])
+        lines[name] = [x for x in capsys.readouterr().err.splitlines() if "every time is a whole multiple" in x]
+    assert codes == {"whole": 2, "ms": 0} and len(lines["whole"]) == 1 and lines["ms"] == []
+    assert lines["whole"][0].startswith("sblsim: error: detections '") and "detections.csv" in lines["whole"][0]
+    assert "every time is a whole multiple of 1 s (whole seconds" in lines["whole"][0]
