@@ -13,6 +13,7 @@ file, its line and column and the allowed range (:class:`ModelError`).
 
 from __future__ import annotations
 
+import csv
 import io
 import re
 from pathlib import Path
@@ -229,10 +230,71 @@ def named(header: list[str], names: tuple[str, ...]) -> int | None:
     return next((normal.index(n) for n in names if n in normal), None)
 
 
+#: The units an ERDDAP-style table (OTN's receiver, tag and animal tables) states in the row under its header, by
+#: the kind of column that holds them (CF / UDUNITS names, case ignored): what the readers read those columns in.
+UNITS = {"latitude": ("degrees_north", "degree_north", "degree_n", "degrees_n"),
+         "longitude": ("degrees_east", "degree_east", "degree_e", "degrees_e"),
+         "time": ("utc", "seconds since 1970-01-01t00:00:00z"),
+         "metres": ("m", "meter", "meters", "metre", "metres")}
+#: A unit's name in such a row: words of letters, digits and ``_ / ^ . - *``, not a number.
+UNIT_NAME = re.compile(r"[A-Za-z%\u00b0][A-Za-z0-9_/^.\-*%\u00b0:+ ]{0,59}")
+
+
+def units_row(header: list[str], body: pd.DataFrame, lines: list[int], kinds: dict[int, str], name: str, what: str
+              ) -> tuple[pd.DataFrame, list[int], int | None]:
+    """The rows of a table without the units row an ERDDAP-style table has under its header (OTN's receiver, tag and
+    animal tables: ``,,degrees_north,degrees_east,UTC,,m``), and that row's line (None where there is none).
+
+    The first row is that units row where every cell it fills is a unit's name (:data:`UNIT_NAME`, not a number or
+    a time) and one of them a position's or a time's (``degrees_north``, ``degrees_east``, ``UTC``: :data:`UNITS`);
+    each column of ``kinds`` (its index: ``"latitude"``, ``"longitude"``, ``"time"``, ``"metres"``) the reader uses
+    must then state one of its kind's units, or none.
+
+    Raises
+    ------
+    ModelError
+        A used column whose stated unit is not its kind's (one line naming the line, the column and the units read):
+        its values are not converted.
+    """
+    if not len(body):
+        return body, lines, None
+    cells = body.iloc[0].astype(str).str.strip().str.lower()
+    given = cells[cells != ""]
+    strong = {u for kind in ("latitude", "longitude", "time") for u in UNITS[kind]}
+    if not len(given) or not given.isin(strong).any() or \
+            not given.str.fullmatch(UNIT_NAME.pattern).fillna(False).all():
+        return body, lines, None
+    for k, kind in kinds.items():
+        if k < len(cells) and cells.iloc[k] and cells.iloc[k] not in UNITS[kind]:
+            raise ModelError(f"{what}: {name!r} line {lines[0]} column {header[k]}: the units row gives "
+                             f"{body.iloc[0, k].strip()[:40]!r}; allowed: {' or '.join(UNITS[kind][:2])} (or empty), "
+                             "the values are read in it, not converted")
+    return body.iloc[1:].reset_index(drop=True), lines[1:], lines[0]
+
+
+def record_lines(text: str, lines: list[int], first_line: int = 1) -> list[int]:
+    """Each row's line in the file where :func:`text_table` numbered it by rows (``lines``) and a quoted cell holds a
+    line break (a comment written over lines): the line each row starts on, by the csv module's parse of the same
+    text; ``lines`` unchanged where no row spans lines (the last row's line is then the file's)."""
+    end = text.rstrip()
+    breaks = end.count("\n") + end.count("\r") - end.count("\r\n")
+    if '"' not in text or not lines or lines[-1] - first_line == breaks:
+        return lines
+    starts, previous = [], 0
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        for _ in reader:
+            starts.append(first_line + previous)
+            previous = reader.line_num
+    except csv.Error:  # a cell beyond the csv module's limit: the rows' numbers as they are
+        return lines
+    return [starts[k - first_line] for k in lines] if len(starts) > lines[-1] - first_line else lines
+
+
 def shown_header(header: list[str]) -> str:
     """A header as a refusal shows it: its first twelve names, each cut to 20 characters."""
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["column", "named", "normal_name", "numbers", "pattern", "read_text", "refuse", "shown_header",
-           "text_table", "too_large"]
+__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "read_text", "record_lines",
+           "refuse", "shown_header", "text_table", "too_large", "units_row"]

@@ -50,7 +50,16 @@ from sblsim.orchestrator.io.frames import (
     transform,
 )
 from sblsim.orchestrator.io.times import iso_utc, utc_seconds
-from sblsim.orchestrator.readers.cells import named, numbers, pattern, read_text, shown_header, text_table
+from sblsim.orchestrator.readers.cells import (
+    named,
+    numbers,
+    pattern,
+    read_text,
+    record_lines,
+    shown_header,
+    text_table,
+    units_row,
+)
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_DETECTION_BYTES
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
 
@@ -65,10 +74,17 @@ ALIASES = {
     "lon": ("lon", "long", "longitude", "deploy_long", "deploy_lon", "stn_long", "decimallongitude"),
     "x": ("x_m", "x", "easting"), "y": ("y_m", "y", "northing"), "z": ("z_m", "z"),
     "depth": ("instrument_depth", "depth", "receiver_depth", "depth_m"), "bottom": ("bottom_depth",),
-    "start": ("deploy_date_time", "deploy_date", "deploy_time", "start"),
+    "start": ("deploy_date_time", "deploy_date", "deploy_time", "deploy_datetime_utc", "start", "time"),
     "end": ("recover_date_time", "recovery_date_time", "recovery_date", "recover_date", "recovery_datetime_utc",
             "end"),
 }
+#: The kind of unit (:data:`~sblsim.orchestrator.readers.cells.UNITS`) an ERDDAP-style units row must state, if any,
+#: over each field read (OTN's receiver deployment table: ``degrees_north``, ``degrees_east``, ``UTC``, ``m``).
+UNIT_KINDS = {"lat": "latitude", "lon": "longitude", "x": "metres", "y": "metres", "z": "metres", "depth": "metres",
+              "bottom": "metres", "start": "time", "end": "time"}
+#: The cells that say a value is missing (ERDDAP's and pandas' ``NaN``, R's ``NA``; case ignored), read as empty
+#: where a field may be empty (a depth, a date) and in the serial (a deployment without one: set aside).
+MISSING = ("nan", "na")
 #: The depths allowed [m] (an instrument's; positive down), and the bottom's (below the surface).
 DEPTH_RANGE = (-10.0, 11000.0)
 BOTTOM_RANGE = (0.0, 11000.0)
@@ -219,22 +235,34 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     """
     path, what = Path(path), "receivers"
     name = str(path)
-    header, body, lines = text_table(read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS), name, what,
-                                     MAX_DEPLOYMENTS)
+    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
+    header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)
+    lines = record_lines(text, lines)  # a quoted comment over lines: each row named by the line it starts on
+    del text
+    index = _index(header)
+    body, lines, units = units_row(header, body, lines, {index[k]: kind for k, kind in UNIT_KINDS.items()
+                                                         if index[k] is not None}, name, what)
+    notes: list[str] = [] if units is None else [f"line {units}: the units row under the header skipped (the "
+                                                  "columns read in its units)"]
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no receivers")
-    index = _index(header)
     geographic = index["lat"] is not None and index["lon"] is not None
     projected = index["x"] is not None and index["y"] is not None
     if crs is not None:
         check_crs(crs, "crs")
         geographic = geographic and is_geographic(crs)
         projected = projected and not is_geographic(crs)
+    if index["serial"] is None and (geographic or projected) and index["station"] is not None:
+        raise ModelError(f"{what}: {name!r} is a station sheet ({shown_header(header)}) without the receivers' "
+                         "serials: the detections are put at receivers by serial; allowed: a receiver deployment "
+                         "table with a serial column (OTN's receiver deployment table: receiver_serial_number; "
+                         "GLATOS's receiver locations: ins_serial_no)")
     if index["serial"] is None or not (geographic or projected):
         given = "" if crs is None else f" (in {crs})"
         raise ModelError(f"{what}: {name!r}: the header needs a serial (or ins_serial_no) column and positions{given}: "
                          "lat and lon (or deploy_lat and deploy_long), or x_m and y_m; got "
                          f"{shown_header(header)}")
+    body, lines = _with_serial(body, lines, header[index["serial"]], index["serial"], name, what, notes)
     serial = pattern(body[index["serial"]], IDENTIFIER, what, name, lines, header[index["serial"]],
                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
 
@@ -251,10 +279,9 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     def values(key: str, low: float, high: float, unit: str, missing: bool = True) -> np.ndarray:
         if index[key] is None:
             return np.full(len(body), np.nan)
-        return numbers(body[index[key]], what, name, lines, header[index[key]], low, high, missing=missing,
-                       unit=unit)
+        cells = _blank(body[index[key]]) if missing else body[index[key]]
+        return numbers(cells, what, name, lines, header[index[key]], low, high, missing=missing, unit=unit)
 
-    notes: list[str] = []
     if geographic:
         lat = values("lat", -90.0, 90.0, "°", missing=False)
         lon = values("lon", -180.0, 180.0, "°", missing=False)
@@ -286,11 +313,12 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     if np.isfinite(z).any() and not np.isfinite(z).all():
         notes.append(f"depths given for {int(np.isfinite(z).sum())} of {len(z)} deployments: the geometry is 2-D "
                      "(give every deployment's depth for 3-D)")
-    start = utc_seconds(body[index["start"]], f"{what}: {name!r}", lines, header[index["start"]], missing=True) \
-        if index["start"] is not None else np.full(len(body), np.nan)
-    end = utc_seconds(body[index["end"]], f"{what}: {name!r}", lines, header[index["end"]], missing=True) \
-        if index["end"] is not None else np.full(len(body), np.nan)
+    start, end = (utc_seconds(_blank(body[index[key]]), f"{what}: {name!r}", lines, header[index[key]], missing=True)
+                  if index[key] is not None else np.full(len(body), np.nan) for key in ("start", "end"))
     start, end = np.where(np.isnan(start), -np.inf, start), np.where(np.isnan(end), np.inf, end)
+    if index["end"] is not None and np.isinf(end).any():
+        notes.append(f"{int(np.isinf(end).sum()):,} of {len(end):,} deployments without a recovery date: open (in the "
+                     "water to the end of the detections)")
     backwards = np.flatnonzero(end <= start)
     if len(backwards):
         k = int(backwards[0])
@@ -317,6 +345,35 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     if ignored:
         notes.append(f"columns not used: {', '.join(h[:30] for h in ignored[:12])}")
     return Deployments(table, chosen, name, notes)
+
+
+def _blank(cells: pd.Series) -> pd.Series:
+    """A column's cells stripped, those saying a value is missing (:data:`MISSING`) made empty."""
+    cells = cells.astype(str).str.strip()
+    return cells.where(~cells.str.lower().isin(MISSING), "")
+
+
+def _with_serial(body: pd.DataFrame, lines: list[int], column: str, k: int, name: str, what: str, notes: list[str]
+                 ) -> tuple[pd.DataFrame, list[int]]:
+    """The rows that name a receiver's serial (column ``k``); those without one (a receiver lost, none recorded:
+    no detection can be put at it) set aside and said in ``notes`` with their lines.
+
+    Raises
+    ------
+    ModelError
+        No row names a serial (one line).
+    """
+    empty = (_blank(body[k]) == "").to_numpy(bool)
+    if not empty.any():
+        return body, lines
+    if empty.all():
+        raise ModelError(f"{what}: {name!r}: no row names a receiver's serial (column {column} empty); allowed: each "
+                         "deployment's serial, the detections are put at receivers by serial")
+    aside = [lines[j] for j in np.flatnonzero(empty)]
+    notes.append(f"{len(aside):,} deployments without a serial ({column} empty: line "
+                 f"{', '.join(map(str, aside[:5]))}{', ...' if len(aside) > 5 else ''}) set aside: the detections are "
+                 "put at receivers by serial")
+    return body[~empty].reset_index(drop=True), [lines[j] for j in np.flatnonzero(~empty)]
 
 
 def _bottom(bottom: np.ndarray, z: np.ndarray, where: str, lines: list[int], column: str | None) -> np.ndarray:

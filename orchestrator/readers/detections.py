@@ -13,7 +13,13 @@ receiver and the transmitter (tag). The receivers' own exports are read into one
   (``VR2W-128355``: the model and the serial, the serial kept), ``Transmitter`` (the full ID ``A69-1602-59335``:
   the tag, its code space also in a column of its own), ``Sensor Value`` and ``Sensor Unit`` (kept per detection:
   a depth in metres, or a raw ``ADC`` value), ``Station Name``; the other columns are ignored;
-* the **Innovasea Fathom (VDAT) CSV**, **GLATOS** and **OTN** detection extracts: :mod:`.exports`.
+* the **Innovasea Fathom (VDAT) CSV** (:mod:`.fathom`), **GLATOS** (:mod:`.glatos`) and **OTN** (:mod:`.otn`)
+  detection extracts.
+
+A network's extract (GLATOS, OTN) is a database query sorted by animal, then time: its rows are put in each
+receiver's order after reading (by receiver and time, stable; :func:`.network.ordered`), exact duplicates (the same
+receiver, tag and time: one row in two extracts) dropped and counted, and no clock is judged in its order
+(:attr:`Detections.row_order`). A receiver's own log (VUE, Fathom, YAPS) is taken in the order it logged (below).
 
 A detection's tag is its full transmitter ID where the file gives the code space (VUE, Fathom, GLATOS, OTN), else its
 id (:mod:`.transmitters`): one id in two code spaces is two tags.
@@ -29,9 +35,9 @@ Each file must be a regular file (a FIFO or a device is refused before it is ope
 pandas builds a cell where a line is longer than 1 MiB or holds more than 512 cells, or the table more than
 :data:`MAX_DETECTION_CELLS` cells (the other tables: :data:`~sblsim.orchestrator.io.tables.MAX_CELLS`; counted by
 :func:`~sblsim.orchestrator.io.tables.check_cells`), and its cells are parsed by pandas as text and every one
-checked (its pattern, finite, within its range); no name or text in a file is
-ever taken as a path. A receiver whose time goes back in the file's order by more than :data:`CLOCK_TOLERANCE` (its
-clock reset at a download, kept in the order it logged) is not sorted: its rows from there on are a new **clock
+checked (its pattern, finite, within its range); no name or text in a file is ever taken as a path. In a receiver's
+own log, a receiver whose time goes back in the file's order by more than :data:`CLOCK_TOLERANCE` (its clock reset
+at a download, kept in the order it logged) is not sorted: its rows from there on are a new **clock
 part** (the frame's ``clock_part`` column, 1, 2, … per receiver, added where a receiver's time goes back), each
 reset kept in :attr:`Detections.clock_resets` (its line, the step and the times either side) for the
 synchronisation to split the clock there and say it. Rows not in the receiver's logging order are refused, not
@@ -50,7 +56,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import iso_utc
-from sblsim.orchestrator.readers import fathom, glatos, otn, vue, yaps
+from sblsim.orchestrator.readers import fathom, glatos, network, otn, vue, yaps
 from sblsim.orchestrator.readers.cells import read_text, text_table
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.readers.transmitters import match
@@ -62,6 +68,12 @@ FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 CLOCK_TOLERANCE = 1e-3
 #: The most resets (times going back in the file's order) one receiver may have; more: rows not in its order.
 MAX_CLOCK_RESETS = 20
+#: The formats that are a network's extract (a database query, sorted by animal then time), not a receiver's log.
+NETWORKS = ("glatos", "otn")
+#: The orders of :attr:`Detections.row_order`: a receiver's own log (VUE, Fathom, YAPS) as logged, its clock judged in
+#: that order; a network's extract put in each receiver's order (:func:`~.network.ordered`).
+LOGGED = "logged"
+SORTED = "sorted by receiver and time (a network extract)"
 
 
 @dataclass
@@ -71,12 +83,14 @@ class Detections:
     Attributes
     ----------
     frame : pandas.DataFrame
-        One row per detection in the file's order: ``receiver`` (str, the serial), ``tag`` (str, the full ID where
+        One row per detection in the file's order (a network extract's: by receiver and time, :attr:`row_order`):
+        ``receiver`` (str, the serial), ``tag`` (str, the full ID where
         the file gives a code space, else the id), ``code_space`` (str, ``""`` for none), ``time`` [s since
         1970-01-01 UTC on the receiver's clock], ``sensor_value`` (float, NaN without one), ``sensor_unit`` (str,
         ``""`` without one; ``raw`` for a raw value a tag sheet's slope and intercept convert), ``line`` (the file's
         line, from 1 at its first); a VUE or Fathom file adds ``receiver_model`` and ``station``, a YAPS file with a
-        ``species`` column keeps it.
+        ``species`` column keeps it; a network extract adds ``station`` where it has one and ``receiver_note``
+        (``""`` for none) where a receiver cell holds a note after its serial.
     source : str
         The file read.
     format : str
@@ -87,7 +101,16 @@ class Detections:
         Each place a receiver's time goes back in the file's order (by more than :data:`CLOCK_TOLERANCE`): its
         ``receiver``, the ``line`` of the first row after it and the ``previous_line``, the ``step_s`` [s] (< 0),
         the times ``before_s`` and ``after_s`` [s since 1970 UTC on its clock] and the new ``clock_part``; the frame
-        then has a ``clock_part`` column. Empty where no receiver's time goes back.
+        then has a ``clock_part`` column. Empty where no receiver's time goes back, and for a network extract
+        (whose order is not a receiver's).
+    row_order : str
+        :data:`LOGGED` (a receiver's own log, its clock judged in the file's order) or :data:`SORTED` (a GLATOS or
+        OTN extract, sorted by receiver and time after reading).
+    duplicates : int
+        The exact duplicates dropped from a network extract (the same receiver, tag and time) [1]; a receiver's log
+        is taken as logged (0).
+    notes : list of str
+        What the reader decided that a user should know (receiver cells read without their note).
     """
 
     frame: pd.DataFrame
@@ -95,6 +118,9 @@ class Detections:
     format: str
     ignored_columns: list[str] = field(default_factory=list)
     clock_resets: list[dict] = field(default_factory=list)
+    row_order: str = LOGGED
+    duplicates: int = 0
+    notes: list[str] = field(default_factory=list)
 
     def tag(self, given: str) -> str | None:
         """The detected tag a user's name stands for (a full ID, or an id where it is unique:
@@ -189,9 +215,13 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
         frame["line"] = np.asarray(lines, np.int64)
     frame = frame.reset_index(drop=True)
-    resets = clock_parts(frame, name, what)
+    if format in NETWORKS:  # a database query's order (by animal, then time), not a receiver's: no clock judged
+        frame, duplicates, notes = network.ordered(frame)
+        resets, order = [], SORTED
+    else:
+        resets, order, duplicates, notes = clock_parts(frame, name, what), LOGGED, 0, []
     ignored = [h for k, h in enumerate(header) if k not in used and h]
-    return Detections(frame, name, format, ignored, resets)
+    return Detections(frame, name, format, ignored, resets, order, duplicates, notes)
 
 
 def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
@@ -246,5 +276,5 @@ def reset_line(reset: dict) -> str:
             f"(its clock from {before} to {after} UTC): a new clock segment (part {reset['clock_part']})")
 
 
-__all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "MAX_CLOCK_RESETS", "clock_parts", "format_of",
-           "read_detections", "reset_line", "sniff_format"]
+__all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "LOGGED", "MAX_CLOCK_RESETS", "NETWORKS", "SORTED",
+           "clock_parts", "format_of", "read_detections", "reset_line", "sniff_format"]

@@ -416,7 +416,7 @@ def _summary(data: Detections, deployments: Deployments, assigned, clocks: dict[
     return {"detections": {"file": data.source, "format": data.format, "rows": int(len(data.frame)),
                            "used": int(len(assigned.detections.frame)),
                            "set_aside": int(len(data.frame) - len(assigned.detections.frame)), "reasons": aside,
-                           "ignored_columns": data.ignored_columns,
+                           "ignored_columns": data.ignored_columns, "duplicates": data.duplicates,
                            "first_utc": iso_utc([times.min()])[0], "last_utc": iso_utc([times.max()])[0]},
             "receivers": deployments.summary(), "frame": deployments.summary()["frame"], "clocks": clocks,
             "tag_sheet": None if sheet is None else {"file": sheet.source, "transmitters": len(sheet.tags)},
