@@ -84,9 +84,10 @@ def output_folder(given: Path | None, default: Path, force: bool, marker: str, w
     return out
 
 
-def add_receivers(p: argparse.ArgumentParser) -> None:
-    """``--receivers``, ``--crs``, ``--frame``: a study's receivers and where they are."""
-    p.add_argument("--receivers", type=Path, required=True, metavar="FILE",
+def add_receivers(p: argparse.ArgumentParser, required: bool = True) -> None:
+    """``--receivers``, ``--crs``, ``--frame``: a study's receivers and where they are (``--receivers`` optional
+    where the command finds them otherwise: ``sblsim track``'s actel workspace)."""
+    p.add_argument("--receivers", type=Path, required=required, metavar="FILE",
                    help="the receivers: serial,sync_tag,x_m,y_m[,z_m], or deployments with lat,lon and dates (GLATOS "
                         "receiver_locations and OTN deployments' names: ins_serial_no, deploy_lat, deploy_long, "
                         "deploy_date_time, recover_date_time, instrument_depth, transmitter)")

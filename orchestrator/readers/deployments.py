@@ -208,7 +208,8 @@ def _index(header: list[str]) -> dict[str, int | None]:
     return {key: named(header, aliases) for key, aliases in ALIASES.items()}
 
 
-def read_deployments(path: Path | str, crs: str | None = None, frame: str | None = None) -> Deployments:
+def read_deployments(path: Path | str, crs: str | None = None, frame: str | None = None,
+                     rows: tuple[list[str], pd.DataFrame, list[int]] | None = None) -> Deployments:
     """Read a study's receivers (the module docstring's columns) into one row per deployment, projected.
 
     Parameters
@@ -221,6 +222,9 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     frame : str, optional
         The metric frame (a projected CRS in metres; default the UTM zone of the array's centre for positions
         given as latitude and longitude).
+    rows : (list of str, pandas.DataFrame, list of int), optional
+        The table's header, rows (text cells) and each row's line, read already by another layout's reader
+        (actel's deployments joined with its stations: :mod:`.actel`); default read from ``path``.
 
     Returns
     -------
@@ -235,10 +239,13 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     """
     path, what = Path(path), "receivers"
     name = str(path)
-    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
-    header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)
-    lines = record_lines(text, lines)  # a quoted comment over lines: each row named by the line it starts on
-    del text
+    if rows is None:
+        text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
+        header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)
+        lines = record_lines(text, lines)  # a quoted comment over lines: each row named by the line it starts on
+        del text
+    else:
+        header, body, lines = rows
     index = _index(header)
     body, lines, units = units_row(header, body, lines, {index[k]: kind for k, kind in UNIT_KINDS.items()
                                                          if index[k] is not None}, name, what)

@@ -14,7 +14,9 @@ receiver and the transmitter (tag). The receivers' own exports are read into one
   the tag, its code space also in a column of its own), ``Sensor Value`` and ``Sensor Unit`` (kept per detection:
   a depth in metres, or a raw ``ADC`` value), ``Station Name``; the other columns are ignored;
 * the **Innovasea Fathom (VDAT) CSV** (:mod:`.fathom`), **GLATOS** (:mod:`.glatos`) and **OTN** (:mod:`.otn`)
-  detection extracts.
+  detection extracts;
+* **actel**'s standard detections (:mod:`.actel`) and the **Thelma** TBR exports in both layouts (:mod:`.thelma`),
+  each told from its header's names as actel tells them.
 
 A network's extract (GLATOS, OTN) is a database query sorted by animal, then time: its rows are put in each
 receiver's order after reading (by receiver and time, stable; :func:`.network.ordered`), exact duplicates (the same
@@ -56,13 +58,13 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import iso_utc
-from sblsim.orchestrator.readers import fathom, glatos, network, otn, vue, yaps
+from sblsim.orchestrator.readers import actel, fathom, glatos, network, otn, thelma, vue, yaps
 from sblsim.orchestrator.readers.cells import read_text, text_table
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.readers.transmitters import match
 
 #: The formats of :func:`read_detections`.
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn", "actel", "thelma")
 #: A receiver's time going back in the file's order by at most this much [s] is taken as rows logged within one
 #: timestamp's resolution (a VR2W's 1 ms), the same clock; by more, a reset: a new clock part.
 CLOCK_TOLERANCE = 1e-3
@@ -131,10 +133,14 @@ class Detections:
 # --------------------------------------------------------------------------- detections
 
 def format_of(first: str) -> str | None:
-    """The export a file's first line shows (``fathom``, ``vue``, ``glatos``, ``otn``), None for none of them."""
+    """The export a file's first line shows (``fathom``, ``thelma``, ``actel``, ``vue``, ``glatos``, ``otn``), None
+    for none of them; Thelma's and actel's told by their columns' names (:func:`.actel.format_by_header`)."""
     lower = first.lower()
     if first.lstrip('"').startswith(fathom.FATHOM_MARK):
         return "fathom"
+    by_names = actel.format_by_header(first)  # before VUE's: Thelma's exports share its date column
+    if by_names is not None:
+        return by_names
     if "date and time (utc" in lower:
         return "vue"
     if "detection_timestamp_utc" in lower:
@@ -154,7 +160,8 @@ def _format_of(first: str, name: str) -> str:
         return "yaps"
     raise ModelError(f"detections: {name!r}: its first line is no format sblsim reads; allowed: a YAPS table "
                      "(epo,frac,tag,serial or ts,tag,serial), a VUE export, a Fathom (VDAT) CSV, a GLATOS or an OTN "
-                     "detection extract (--format yaps|vue|fathom|glatos|otn)")
+                     "detection extract, actel's detections (Timestamp,Receiver,CodeSpace,Signal) or a Thelma TBR "
+                     "export (--format " + "|".join(FORMATS) + ")")
 
 
 def sniff_format(path: Path | str) -> str:
@@ -210,7 +217,7 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no detections")
     reader = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos,
-              "otn": otn.otn}[format]
+              "otn": otn.otn, "actel": actel.actel, "thelma": thelma.thelma}[format]
     frame, used = reader(header, body, lines, name, what)
     if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
         frame["line"] = np.asarray(lines, np.int64)
@@ -270,9 +277,10 @@ def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
 
 def reset_line(reset: dict) -> str:
     """One line naming a receiver's time going back in the file's order (an entry of
-    :attr:`Detections.clock_resets`)."""
+    :attr:`Detections.clock_resets`; of many files, the file's named)."""
     before, after = (text[:23] for text in iso_utc([reset["before_s"], reset["after_s"]]))
-    return (f"receiver {reset['receiver']}: its time goes back {-reset['step_s']:.6g} s at line {reset['line']} "
+    where = f"line {reset['line']}" + (f" of {reset['file']}" if reset.get("file") else "")
+    return (f"receiver {reset['receiver']}: its time goes back {-reset['step_s']:.6g} s at {where} "
             f"(its clock from {before} to {after} UTC): a new clock segment (part {reset['clock_part']})")
 
 

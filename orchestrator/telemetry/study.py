@@ -42,11 +42,12 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.assign import assign
-from sblsim.orchestrator.readers.deployments import Deployments, read_deployments
-from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.deployments import Deployments
+from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
-from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, read_tag_sheet, spec_for
+from sblsim.orchestrator.readers.study_files import read_study, study_files
+from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, spec_for
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.readers.water import read_temperature_series
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
@@ -168,22 +169,26 @@ def _tag_detections(mine: pd.DataFrame, spec: TagSpec) -> pd.DataFrame:
     return mine.assign(sensor_value=depth, sensor_unit=np.where(np.isfinite(depth), "m", ""))
 
 
-def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, workdir: Path,
+def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: Path | None = None, *, workdir: Path,
               sync: Path | None = None, format: str | None = None, crs: str | None = None, frame: str | None = None,
               chosen: Sequence[str] | None = None, sound_speed: float | None = None,
               sound_speed_file: Path | None = None, temperature: float | None = None, salinity: float | None = None,
               bin_hours: float = 1.0, workers: int | None = None, scheduler: str | None = None,
               toa_sigma: float | None = None, started: Callable[[list[str], dict[str, Any]], None] | None = None,
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
-              water_depth: float | None = None, force_interval: bool = False) -> StudyOutcome:
+              water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
+              tz: str | None = None) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
     ----------
-    detections, receivers : Path
-        The detections (any export) and the receivers or deployments.
+    detections : Path or sequence of Path
+        The detections (any export): files, a folder of them, or an actel workspace (its deployments, stations and
+        biometrics too: :mod:`~sblsim.orchestrator.readers.study_files`).
+    receivers : Path or None
+        The receivers or deployments (None: an actel workspace's).
     tags : Path, optional
-        The tag sheet.
+        The tag sheet (or actel's biometrics).
     workdir : Path
         The folder each tag's folder is written into (its matrix, then its track).
     sync : Path, optional
@@ -220,6 +225,11 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         (:func:`~sblsim.orchestrator.sync.toa.build_toa`).
 
     Returns
+    spatial : Path, optional
+        actel's stations (``spatial.csv``) for actel's deployments (default: an actel workspace's).
+    tz : str, optional
+        The study's IANA time zone (``Europe/Copenhagen``) of actel's local times (deployments, release dates);
+        without it such times are refused unless they carry their offset.
     -------
     StudyOutcome
 
@@ -230,10 +240,8 @@ def run_study(detections: Path, receivers: Path, tags: Path | None = None, *, wo
         (one line). A tag that cannot be tracked is a row of ``tags.csv``.
     """
     begun = clock.perf_counter()
-    notes: list[str] = []
-    deployments = read_deployments(receivers, crs, frame)
-    data = read_detections(detections, format)
-    sheet = read_tag_sheet(tags) if tags is not None else None
+    deployments, data, sheet, notes = read_study(study_files(detections, receivers, spatial, tags), format, crs, frame,
+                                                 tz)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     if temperature_path is not None:  # refused here in one line, not once per tag
         read_temperature_series(temperature_path, 0.0, absolute=True)

@@ -11,9 +11,10 @@ from sblsim.models.tracking.timing import TOA_SIGMA_RANGE
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, names_argument, real_argument, text_argument
 from sblsim.orchestrator.io.frames import check_crs, check_metric
+from sblsim.orchestrator.readers.local_times import study_zone
 
 #: The detections' formats (None: read from the file's first line).
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
+FORMATS = ("yaps", "vue", "fathom", "glatos", "otn", "actel", "thelma")
 #: The synchronisation's bins [h] and the sound speeds [m/s] taken.
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)
@@ -22,10 +23,10 @@ MAX_WORKERS = 256
 
 
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
-             medium: tuple, names: dict[str, str], toa_sigma: Any = None, force_interval: Any = False
-             ) -> dict[str, Any]:
-    """Every option of a study checked (``names``: how each is spelled where it was given), as
-    :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
+             medium: tuple, names: dict[str, str], toa_sigma: Any = None, force_interval: Any = False,
+             tz: Any = None) -> dict[str, Any]:
+    """Every option of a study checked (``names``: how each is spelled where it was given; ``tz``, the study's IANA
+    time zone, where given), as :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
     if format is not None and format not in FORMATS:
         raise ConfigError(f"{names['format']}: {str(format)[:40]!r}; allowed: {', '.join(FORMATS)} (or none: read "
                           "from the file's first line)")
@@ -44,7 +45,8 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
             "bin_hours": real_argument(bin_hours, names["bin_hours"], *BIN_HOURS, "h"), "workers": workers,
             "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
                 toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s"),
-            "force_interval": flag_argument(force_interval, names["force_interval"])}
+            "force_interval": flag_argument(force_interval, names["force_interval"]),
+            "tz": None if tz is None else study_zone(tz, names["tz"]).key}
 
 
 __all__ = ["BIN_HOURS", "FORMATS", "MAX_WORKERS", "SOUND_SPEED"]
