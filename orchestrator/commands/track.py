@@ -39,11 +39,9 @@ class StudyResult:
         ``sigma_x``, ``sigma_y`` [m] (``sigma_z``), ``receivers_heard``, ``quality`` (``ok``, ``restart``,
         ``flagged``).
     tags : pandas.DataFrame
-        ``tags.csv``: one row per tag asked for: ``status`` ``tracked`` (a row positioned at least) or ``refused``
-        with its ``reason_code`` and ``reason``; its detections, the receivers that heard it, its pings (those
-        heard by enough receivers at once), positioned, set aside and not positioned (by why; the three sum to its
-        pings), flagged, the median 2-D σ of its rows not flagged [m], the ping type stated and taken, the sound
-        speed, its times' resolution, its first and last row's UTC time, its folder.
+        ``tags.csv``: one row per tag asked for: ``status`` ``tracked`` or ``refused`` and the ``reason``, its
+        detections, pings, rows positioned and flagged, the median 2-D σ of its rows not flagged [m], the ping type
+        stated and taken, the sound speed, its first and last row's UTC time, its folder.
     receivers : pandas.DataFrame
         ``receivers.csv``: the deployments, in the frame and in latitude and longitude, with their dates.
     summary : dict
@@ -73,7 +71,8 @@ class StudyResult:
         return figures
 
 
-def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | None = None,
+def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Path | None = None,
+          tags: str | Path | None = None, spatial: str | Path | None = None, tz: str | None = None,
           tag: str | Sequence[str] | None = None, sync: str | Path | None = None, format: str | None = None,
           crs: str | None = None, frame: str | None = None, sound_speed: float | None = None,
           sound_speed_file: str | Path | None = None, temperature: float | None = None,
@@ -86,17 +85,30 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
 
     Parameters
     ----------
-    detections : str or Path
-        The receivers' detections: a YAPS table, a VUE export, a Fathom (VDAT) CSV, a GLATOS or an OTN detection
-        extract (raw: each receiver's own clock).
-    receivers : str or Path
+    detections : str or Path, or a sequence of them
+        The receivers' detections (raw: each receiver's own clock): files (a YAPS table, a VUE export, a Fathom
+        (VDAT) CSV, a GLATOS or an OTN detection extract, actel's detections, a Thelma TBR export; each file's
+        format told from its first line), a folder of them (its ``*.csv``), or an actel workspace folder
+        (``deployments.csv``, ``spatial.csv``, ``biometrics.csv`` and a ``detections`` folder or
+        ``detections.csv``: :mod:`sblsim.orchestrator.readers.study_files`).
+    receivers : str or Path, optional
         The receivers: deployments in ``lat``, ``lon`` with dates (GLATOS ``receiver_locations``, OTN deployments:
         ``ins_serial_no``, ``deploy_lat``, ``deploy_long``, ``deploy_date_time``, ``recover_date_time``,
-        ``instrument_depth``, ``transmitter`` for a co-located sync tag), or ``serial, sync_tag, x_m, y_m``.
+        ``instrument_depth``, ``transmitter`` for a co-located sync tag), ``serial, sync_tag, x_m, y_m``, or actel's
+        deployments (``Receiver``, ``Station.name``, ``Start``, ``Stop``: with ``spatial`` and ``tz``); default an
+        actel workspace's.
     tags : str or Path, optional
         The tag sheet (``transmitter``, ``ping_type``, ``min_delay``, ``max_delay``, ``role``, sensor columns:
-        :mod:`sblsim.orchestrator.readers.tag_sheet`). Without one every detected tag that is not a sync tag is
-        tracked, its ping type inferred.
+        :mod:`sblsim.orchestrator.readers.tag_sheet`), or actel's biometrics (``Signal``, ``Code.space``,
+        ``Release.date``: each signal an animal tag, its ping type inferred). Without one every detected tag that is
+        not a sync tag is tracked, its ping type inferred.
+    spatial : str or Path, optional
+        actel's stations (``Station.name``, ``Latitude``, ``Longitude``, ``Type``): the positions of actel's
+        deployments, joined by station (release sites are no receivers); default an actel workspace's.
+    tz : str, optional
+        The study's IANA time zone (``Europe/Copenhagen``): actel's deployments and release dates are in local
+        time, each converted to UTC with that date's offset; without it such a time is refused unless it carries
+        its offset (never taken as UTC).
     tag : str or sequence of str, optional
         Only these transmitters (full IDs or ids; a text separated by commas, or a list).
     sync : str or Path, optional
@@ -155,20 +167,24 @@ def track(detections: str | Path, *, receivers: str | Path, tags: str | Path | N
         A file refused by its reader (one line naming the file, its line and column and the allowed values), no
         detection inside a deployment, bad options. A tag that cannot be tracked is a row of ``tags.csv`` saying why.
     """
-    detections = path_argument(detections, "detections", optional=False)
-    receivers = path_argument(receivers, "receivers", optional=False)
+    detections = [path_argument(d, "detections", optional=False) for d in
+                  (detections if isinstance(detections, (list, tuple)) else [detections])]
+    receivers = path_argument(receivers, "receivers")
     tags = path_argument(tags, "tags")
     sync = path_argument(sync, "sync")
     check_progress(progress)
+    spatial = path_argument(spatial, "spatial")
     medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
                                    ("sound_speed", "sound_speed_file", "temperature", "salinity"), temperature_file)
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
                        {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma",
-                                       "force_interval")},
-                       toa_sigma, force_interval) | water_arguments(temperature_file, water_depth,
-                                                                    ("temperature_file", "water_depth"))
+                                       "force_interval", "tz")},
+                       toa_sigma, force_interval, tz) | water_arguments(temperature_file, water_depth,
+                                                                        ("temperature_file", "water_depth"))
+    options["spatial"] = spatial
     target = prepare_out(out, force, "study.json", "study")
-    outcome = _run(detections, receivers, tags, sync, options, target, progress)
+    outcome = _run(detections[0] if len(detections) == 1 else detections, receivers, tags, sync, options, target,
+                   progress)
     return _result(outcome, target)
 
 
@@ -183,13 +199,22 @@ HELP = "track every tag of a telemetry study: deployments, detection exports and
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim track``'s arguments."""
-    p.add_argument("detections", type=Path, help="the receivers' detections: a YAPS table, a VUE export, a Fathom "
-                   "(VDAT) CSV, a GLATOS or an OTN detection extract")
-    add_receivers(p)
+    p.add_argument("detections", type=Path, nargs="+", metavar="DETECTIONS",
+                   help="the receivers' detections: files (a YAPS table, a VUE export, a Fathom (VDAT) CSV, a GLATOS "
+                        "or an OTN detection extract, actel's detections, a Thelma TBR export), a folder of them, or "
+                        "an actel workspace folder (deployments.csv, spatial.csv, biometrics.csv, detections/)")
+    add_receivers(p, required=False)
+    p.add_argument("--spatial", type=Path, default=None, metavar="CSV",
+                   help="actel's stations (Station.name, Latitude, Longitude, Type) for actel's deployments (Receiver, "
+                        "Station.name, Start, Stop) given as --receivers (default: the workspace's spatial.csv)")
+    p.add_argument("--tz", default=None, metavar="ZONE",
+                   help="the study's time zone, an IANA name (Europe/Copenhagen): actel's deployments and release "
+                        "dates are local times (refused without it unless they carry their UTC offset)")
     p.add_argument("--tags", type=Path, default=None, metavar="SHEET",
                    help="the tag sheet: transmitter, ping_type (sbi/rbi/pbi), min_delay, max_delay [s], role "
-                        "(animal/sync/reference), sensor_type, sensor_slope, sensor_intercept (default: every detected "
-                        "tag that is not a sync tag, its ping type inferred)")
+                        "(animal/sync/reference), sensor_type, sensor_slope, sensor_intercept; or actel's "
+                        "biometrics.csv (default: the workspace's biometrics.csv, else every detected tag that is not "
+                        "a sync tag, its ping type inferred)")
     p.add_argument("--tag", default=None, metavar="IDS",
                    help="only these transmitters (full IDs or ids, separated by commas)")
     p.add_argument("--sync", type=Path, default=None, metavar="DIR",
@@ -232,12 +257,17 @@ def main(args: argparse.Namespace) -> int:
                                    args.temperature_file, "--temperature-file")
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
-                                                                       "workers", "toa_sigma", "force_interval")},
-                       args.toa_sigma, args.force_interval) \
+                                                                       "workers", "toa_sigma", "force_interval",
+                                                                       "tz")},
+                       args.toa_sigma, args.force_interval, args.tz) \
         | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
-    out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections.stem)}", args.force,
+    options["spatial"] = args.spatial
+    out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections[0].stem)}", args.force,
                         "study.json", "study")
-    outcome = _run(args.detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
+    from sblsim.orchestrator.readers.study_files import DetectionFiles  # pandas: loaded as the study starts
+
+    detections = args.detections[0] if len(args.detections) == 1 else DetectionFiles(args.detections)
+    outcome = _run(detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
     for line, warning in tag_lines(outcome.tags):
         print(line, file=sys.stderr if warning else sys.stdout)
     for note in outcome.summary["notes"]:

@@ -1,11 +1,12 @@
 """A study's files (:func:`write_study`), for R, QGIS and a reader: ``tracks.csv`` (every tag's rows: ``tag``,
 ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``, ``sigma_x``, ``sigma_y``, ``quality``, ...), ``tags.csv``
-(a row per tag), ``receivers.csv`` (the deployments in the frame and in latitude and longitude), ``study.json`` (the
-summary: the files, the frame and its CRS, the detections set aside, the clocks, the tags),
-``tracks.geojson`` (RFC 7946: the receivers as points, each tag's rows not flagged as a line, WGS 84 longitude and
-latitude; where the frame is known), ``map.png`` (every track over the receivers, a scale bar), the
-synchronisation made (``sync/``, as ``sblsim sync`` writes it) and one folder per tag (its ``toa.txt``,
-``receivers.csv``, ``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes them).
+(a row per tag), ``receivers.csv`` (every deployment of the sheet in the frame and in latitude and longitude, with
+``used``, ``not_used`` and ``detections``: :mod:`sblsim.orchestrator.readers.in_water`), ``study.json`` (the
+summary: the files, the frame and its CRS, the detections set aside, the deployments used and not, the clocks, the
+tags), ``tracks.geojson`` (RFC 7946: the receivers used as points, each tag's rows not flagged as a line, WGS 84
+longitude and latitude; where the frame is known), ``map.png`` (:func:`study_map`), the synchronisation made
+(``sync/``, as ``sblsim sync`` writes it) and one folder per tag (its ``toa.txt``, ``receivers.csv``,
+``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes them).
 """
 
 from __future__ import annotations
@@ -215,9 +216,9 @@ def study_map(outcome: StudyOutcome):
     ax.xaxis.set_major_locator(MaxNLocator(max(3, int(width / 1.1))))
     ax.tick_params(labelsize=7)
     if finite.any():  # a band below the receivers for the north arrow and the scale bar
-        span = max(max(spans), 1.0)
-        ax.set(xlim=(np.min(xs[finite]) - origin[0] - 0.05 * span, np.max(xs[finite]) - origin[0] + 0.05 * span),
-               ylim=(np.min(ys[finite]) - origin[1] - 0.16 * span, np.max(ys[finite]) - origin[1] + 0.05 * span))
+        wide, high = max(spans[0], 0.3 * spans[1], 1.0), max(spans[1], 0.3 * spans[0], 1.0)
+        ax.set(xlim=(np.min(xs[finite]) - origin[0] - 0.05 * wide, np.max(xs[finite]) - origin[0] + 0.05 * wide),
+               ylim=(np.min(ys[finite]) - origin[1] - 0.18 * high, np.max(ys[finite]) - origin[1] + 0.05 * high))
     frame = outcome.summary.get("frame")
     crs = f" ({frame['crs']})" if frame else ""
     ax.set(aspect="equal", xlabel=f"x [m] east of {origin[0]:,.0f}{crs}",

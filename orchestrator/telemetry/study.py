@@ -4,7 +4,9 @@ latitude, longitude and UTC.
 
 1. The deployments are read and projected (:mod:`.deployments`), the detections read in any export
    (:func:`~sblsim.orchestrator.readers.detections.read_detections`) and each put at its deployment, those outside one
-   set aside and counted (:func:`~.deployments.assign`); the tag sheet is read (:mod:`.tag_sheet`).
+   set aside and counted (:func:`~.deployments.assign`); the array is the deployments that logged a detection kept,
+   in a frame chosen over them (:func:`~sblsim.orchestrator.readers.in_water.in_water`: a network's other
+   deployments listed as not used, in one line); the tag sheet is read (:mod:`.tag_sheet`).
 2. The clocks: a synchronisation's folder given (``sync``: its ``offsets.csv``, its refined positions where it has
    them); else synchronised here, once, from the deployments' sync tags
    (:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag, taken as logged
