@@ -171,9 +171,9 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
                   (detections if isinstance(detections, (list, tuple)) else [detections])]
     receivers = path_argument(receivers, "receivers")
     tags = path_argument(tags, "tags")
+    spatial = path_argument(spatial, "spatial")
     sync = path_argument(sync, "sync")
     check_progress(progress)
-    spatial = path_argument(spatial, "spatial")
     medium = sound_speed_arguments(sound_speed, sound_speed_file, temperature, salinity,
                                    ("sound_speed", "sound_speed_file", "temperature", "salinity"), temperature_file)
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,

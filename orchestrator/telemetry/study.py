@@ -225,13 +225,13 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         Take each tag's stated interval (the sheet's) where its detections contradict it as a whole (said in a note
         with the detections it drops); else that tag is a refused row of ``tags.csv`` saying so
         (:func:`~sblsim.orchestrator.sync.toa.build_toa`).
-
-    Returns
     spatial : Path, optional
         actel's stations (``spatial.csv``) for actel's deployments (default: an actel workspace's).
     tz : str, optional
         The study's IANA time zone (``Europe/Copenhagen``) of actel's local times (deployments, release dates);
         without it such times are refused unless they carry their offset.
+
+    Returns
     -------
     StudyOutcome
 
