@@ -39,9 +39,11 @@ class StudyResult:
         ``sigma_x``, ``sigma_y`` [m] (``sigma_z``), ``receivers_heard``, ``quality`` (``ok``, ``restart``,
         ``flagged``).
     tags : pandas.DataFrame
-        ``tags.csv``: one row per tag asked for: ``status`` ``tracked`` or ``refused`` and the ``reason``, its
-        detections, pings, rows positioned and flagged, the median 2-D σ of its rows not flagged [m], the ping type
-        stated and taken, the sound speed, its first and last row's UTC time, its folder.
+        ``tags.csv``: one row per tag asked for: ``status`` ``tracked`` (a row positioned at least) or ``refused``
+        with its ``reason_code`` and ``reason``; its detections, the receivers that heard it, its pings (those
+        heard by enough receivers at once), positioned, set aside and not positioned (by why; the three sum to its
+        pings), flagged, the median 2-D σ of its rows not flagged [m], the ping type stated and taken, the sound
+        speed, its times' resolution, its first and last row's UTC time, its folder.
     receivers : pandas.DataFrame
         ``receivers.csv``: the deployments, in the frame and in latitude and longitude, with their dates.
     summary : dict

@@ -59,7 +59,8 @@ SENSOR_COLUMNS = {"m": "depth_m", "°c": "temperature_c", "c": "temperature_c", 
                   "m/s2": "acceleration_m_s2"}
 #: How ``sblsim toa`` takes a tag's interval and a contradicted one anyway, as its refusals name them (a command
 #: that takes them otherwise passes its own to :func:`build_toa`).
-OPTION_NAMES = {"interval": "--ping-type rbi --burst-interval MIN:MAX", "force_interval": "--force-interval"}
+OPTION_NAMES = {"interval": "--ping-type rbi --burst-interval MIN:MAX, or pbi --burst-sequence FILE",
+                "force_interval": "--force-interval"}
 
 
 @dataclass

@@ -24,7 +24,6 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.sync.at_once import heard_at_once
-from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning, time_quantum
 from sblsim.orchestrator.sync.clocks import Clocks
 from sblsim.orchestrator.sync.declared import NOMINAL_SOUND_SPEED
@@ -92,7 +91,9 @@ class Census:
     logged : bool
         Whether the clocks were taken as logged (no synchronisation).
     crossing : float
-        [s] the largest travel time between the receivers that heard it, at the nominal sound speed.
+        [s] the sound's crossing time of the receivers that hear one of its pings at once: the median over its
+        pings heard by ``need`` receivers or more of their extent (the diagonal of their bounding box), at the
+        nominal sound speed (the travel times a position is made of; a network's whole extent is not).
     """
 
     per_receiver: dict[str, int]
@@ -137,23 +138,35 @@ def count(mine: pd.DataFrame, table: pd.DataFrame, clocks: Clocks, logged: bool)
     row = {n: k for k, n in enumerate(table["receiver"])}
     synced = {n: k for k, n in enumerate(clocks.receivers)}
     usable = [n for n in per_receiver if n in row and n in synced]
-    heard = [row[n] for n in per_receiver if n in row]
-    crossing = largest_travel_time(xyz[heard, :dim], NOMINAL_SOUND_SPEED)
     quantum = time_quantum(mine["time"].to_numpy(float))
     use = mine[mine["receiver"].isin(usable)]
     pings = at_once = to_start = most = 0
+    crossing = 0.0
     if len(use):
         _, inside, times = on_the_clocks(use, clocks, synced)
-        grouped = heard_at_once(use["receiver"].map(row).to_numpy(np.int64)[inside], times[inside], xyz[:, :dim],
-                                SLOWEST_SOUND_SPEED, TOLERANCE + quantum)
+        receiver = use["receiver"].map(row).to_numpy(np.int64)[inside]
+        grouped = heard_at_once(receiver, times[inside], xyz[:, :dim], SLOWEST_SOUND_SPEED, TOLERANCE + quantum)
         pings, most = len(grouped.receivers), int(grouped.receivers.max(initial=0))
         at_once, to_start = grouped.heard_by(dim + 1), grouped.heard_by(dim + 2)
+        crossing = _crossing(grouped.ping, receiver, grouped.detections_heard_by(dim + 1), xyz[:, :dim])
     return Census(per_receiver, usable, pings, at_once, to_start, most, dim + 1, quantum, logged, crossing)
 
 
+def _crossing(ping: np.ndarray, receiver: np.ndarray, rich: np.ndarray, positions: np.ndarray) -> float:
+    """[s] the median over the pings heard at once (``rich``: their detections) of the extent of the receivers that
+    heard each (the diagonal of their bounding box [m]) at the nominal sound speed; 0 where there is none."""
+    if not rich.any():
+        return 0.0
+    order = np.argsort(ping[rich], kind="stable")
+    p, where = ping[rich][order], positions[receiver[rich][order]]
+    starts = np.flatnonzero(np.r_[True, p[1:] != p[:-1]])
+    extent = np.maximum.reduceat(where, starts, axis=0) - np.minimum.reduceat(where, starts, axis=0)
+    return float(np.median(np.linalg.norm(extent, axis=1))) / NOMINAL_SOUND_SPEED
+
+
 def _listed(counts: dict[str, int], limit: int = 6) -> str:
-    """Receivers and their detections, most first: ``A 1,204, B 56`` (and how many more)."""
-    shown = [f"{name} {n:,}" for name, n in list(counts.items())[:limit]]
+    """Receivers and their detections, most first: ``A: 1,204, B: 56`` (and how many more)."""
+    shown = [f"{name}: {n:,}" for name, n in list(counts.items())[:limit]]
     more = len(counts) - limit
     return ", ".join(shown) + (f" and {more} more" if more > 0 else "")
 
@@ -176,18 +189,18 @@ def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tupl
         name, n = next(iter(heard.items()))
         return "one_receiver", f"heard by 1 receiver ({name}, {n:,} detection{'s' * (n != 1)}): {at_once}"
     if len(heard) < need:
-        return "too_few_receivers", f"heard by {len(heard)} receivers ({_listed(heard)} detections): {at_once}"
+        return "too_few_receivers", f"heard by {len(heard)} receivers (detections {_listed(heard)}): {at_once}"
     if len(census.synchronised) < need:
         alone = {n: c for n, c in heard.items() if n not in census.synchronised}
         return "receivers_not_synchronised", (
             f"heard by {len(heard)} receivers, {len(census.synchronised)} of them on a synchronised clock "
-            f"({', '.join(census.synchronised) or 'none'}; not synchronised: {_listed(alone)} detections): {at_once}; "
+            f"({', '.join(census.synchronised) or 'none'}; not synchronised, detections {_listed(alone)}): {at_once}; "
             "allowed: their sync tags heard by the others (the deployments' transmitter column), or --sync DIR")
     if census.at_once < MIN_AT_ONCE:
         most = f"never more than {census.most} at once" if census.most < need else f"at most {census.most} at once"
         return "too_few_receivers_at_once", (
             f"{census.at_once:,} of {census.pings:,} pings heard by {need} receivers or more at once ({most}; "
-            f"heard by {len(heard)} receivers: {_listed(heard)} detections): {at_once}, and a track at least "
+            f"heard by {len(heard)} receivers, detections {_listed(heard)}): {at_once}, and a track at least "
             f"{MIN_AT_ONCE} such pings")
     if not stationary and not census.to_start:
         return "too_few_receivers_at_once", (
@@ -201,8 +214,9 @@ def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tupl
             f"{whole}, unsynchronised times: {q:g} s is {q * NOMINAL_SOUND_SPEED:,.0f} m of range at "
             f"{NOMINAL_SOUND_SPEED:,.0f} m/s (the rounding alone {q / np.sqrt(12.0):.2g} s, "
             f"{q / np.sqrt(12.0) * NOMINAL_SOUND_SPEED:,.0f} m, one standard deviation), where sound crosses the "
-            f"receivers that heard it in {1000 * census.crossing:,.0f} ms and no sync tag set their clocks; allowed: "
-            "the detections exported with their sub-second times, or the deployments' sync tags (transmitter column)")
+            f"receivers that hear one of its pings at once in {1000 * census.crossing:,.0f} ms (the median) and no "
+            "sync tag set their clocks; allowed: the detections exported with their sub-second times, or the "
+            "deployments' sync tags (transmitter column)")
     return None
 
 

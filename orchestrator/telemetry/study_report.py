@@ -20,8 +20,9 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
     where = (f"frame {frame['name']} ({frame['crs']}, {frame['chosen']}; scale factor "
              f"{frame.get('scale_factor', float('nan')):.5f})") if frame else \
         "a local frame without a CRS (no lat/lon out)"
-    out = [f"study of {detections} ({d['format']}): {d['rows']} detections, {d['used']} used at {r['deployments']} "
-           f"deployments of {r['receivers']} receivers, {d['set_aside']} set aside ({why['outside_deployment']} "
+    out = [f"study of {detections} ({d['format']}): {d['rows']} detections, {d['used']} used at "
+           f"{_plural(r['deployments'], 'deployment')} of {_plural(r['receivers'], 'receiver')}, "
+           f"{d['set_aside']} set aside ({why['outside_deployment']} "
            f"outside a deployment, {why['receiver_not_in_table']} at serials not in the receivers file, "
            f"{why['sync_tag_outside_deployment']} of sync tags out of the water); {d['first_utc']} to {d['last_utc']}",
            f"  {where}"]
@@ -71,10 +72,10 @@ def tag_line(row: Any) -> str:
 
 def tag_lines(table: Any) -> list[tuple[str, bool]]:
     """The console's lines of a study's tags (``table``: ``tags.csv``), each with whether it is a warning for
-    standard error: a line per tracked tag (:func:`tag_line`), a warning per refused tag (its reason), the first
-    :data:`MAX_REFUSED_LINES` of them, the others counted by ``reason_code``."""
+    standard error: a line per tracked tag (:func:`tag_line`), a warning per refused tag (its reason), the
+    :data:`MAX_REFUSED_LINES` with the most detections, the others counted by ``reason_code``."""
     lines: list[tuple[str, bool]] = []
-    refused = table[table["status"] != "tracked"]
+    refused = table[table["status"] != "tracked"].sort_values("detections", ascending=False, kind="stable")
     for row in table.itertuples(index=False):
         if row.status == "tracked":
             lines.append((tag_line(row), False))
@@ -94,9 +95,10 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
     tracked = table[table["status"] == "tracked"]
     codes = table.loc[table["status"] != "tracked", "reason_code"].value_counts()
     why = f" (not tracked: {', '.join(f'{code} {n:,}' for code, n in codes.items())})" if len(codes) else ""
-    return (f"  {int(len(tracked)):,} of {_plural(len(table), 'tag')} tracked{why}, {int(tracked['flagged'].sum()):,} "
-            f"of the {_plural(tracked['positioned'].sum(), 'row')} positioned flagged, in {seconds:.1f} s; written to "
-            f"{out}/ ({files})")
+    rows = f", {int(tracked['flagged'].sum()):,} of the {_plural(tracked['positioned'].sum(), 'row')} positioned " \
+        "flagged" if len(tracked) else ""
+    return f"  {int(len(tracked)):,} of {_plural(len(table), 'tag')} tracked{why}{rows}, in {seconds:.1f} s; " \
+        f"written to {out}/ ({files})"
 
 
 __all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "tag_line", "tag_lines"]

@@ -140,3 +140,27 @@ def test_a_network_s_thousand_deployments_make_no_thousand_columns(tmp_path):
     written = pd.read_csv(tmp_path / "work" / row["folder"] / "receivers.csv", dtype={"name": str})
     assert row["receivers"] == len(heard) and sorted(written["name"]) == heard
     assert result.matrices[row["folder"]].toa.shape[1] == len(heard)
+
+
+def test_the_console_names_the_refused_tags_with_most_detections_and_counts_the_others(tmp_path):
+    """12 refused tags: the 10 with the most detections named with their reasons, the other 2 counted by code; the
+    last line counts the tags by code and says no rows where none was tracked."""
+    from sblsim.orchestrator.telemetry.study import TAG_COLUMNS
+    from sblsim.orchestrator.telemetry.study_report import MAX_REFUSED_LINES, closing_line, tag_lines
+
+    detections = [5, 900, 3, 70, 1, 44, 8, 2, 61, 13, 400, 6]
+    codes = ["one_receiver"] * 7 + ["never_detected"] * 5
+    table = pd.DataFrame([{c: None for c in TAG_COLUMNS} | {
+        "tag": f"T{k}", "transmitter": f"T{k}", "status": "refused", "reason_code": code, "reason": f"why {k}",
+        "detections": n, "pings": n, "positioned": 0, "set_aside": 0, "not_positioned": n, "flagged": 0}
+        for k, (n, code) in enumerate(zip(detections, codes))], columns=list(TAG_COLUMNS))
+    lines = tag_lines(table)
+    assert all(warning for _, warning in lines) and len(lines) == MAX_REFUSED_LINES + 1
+    named = [line.split("tag ")[1].split(" ")[0] for line, _ in lines[:-1]]
+    order = sorted(range(12), key=lambda k: -detections[k])
+    assert named == [f"T{k}" for k in order[:MAX_REFUSED_LINES]]
+    rest = pd.Series([codes[k] for k in order[MAX_REFUSED_LINES:]]).value_counts()
+    assert lines[-1][0].startswith(f"sblsim: warning: 2 more tags not tracked ("
+                                   f"{', '.join(f'{c} {n}' for c, n in rest.items())})")
+    last = closing_line(table, 1.0, tmp_path, "tags.csv")
+    assert last.startswith("  0 of 12 tags tracked (not tracked: one_receiver 7, never_detected 5), in 1.0 s")
