@@ -13,7 +13,6 @@ file, its line and column and the allowed range (:class:`ModelError`).
 
 from __future__ import annotations
 
-import csv
 import io
 import re
 from pathlib import Path
@@ -272,29 +271,10 @@ def units_row(header: list[str], body: pd.DataFrame, lines: list[int], kinds: di
     return body.iloc[1:].reset_index(drop=True), lines[1:], lines[0]
 
 
-def record_lines(text: str, lines: list[int], first_line: int = 1) -> list[int]:
-    """Each row's line in the file where :func:`text_table` numbered it by rows (``lines``) and a quoted cell holds a
-    line break (a comment written over lines): the line each row starts on, by the csv module's parse of the same
-    text; ``lines`` unchanged where no row spans lines (the last row's line is then the file's)."""
-    end = text.rstrip()
-    breaks = end.count("\n") + end.count("\r") - end.count("\r\n")
-    if '"' not in text or not lines or lines[-1] - first_line == breaks:
-        return lines
-    starts, previous = [], 0
-    reader = csv.reader(io.StringIO(text, newline=""))
-    try:
-        for _ in reader:
-            starts.append(first_line + previous)
-            previous = reader.line_num
-    except csv.Error:  # a cell beyond the csv module's limit: the rows' numbers as they are
-        return lines
-    return [starts[k - first_line] for k in lines] if len(starts) > lines[-1] - first_line else lines
-
-
 def shown_header(header: list[str]) -> str:
     """A header as a refusal shows it: its first twelve names, each cut to 20 characters."""
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "read_text", "record_lines",
-           "refuse", "shown_header", "text_table", "too_large", "units_row"]
+__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "read_text", "refuse",
+           "shown_header", "text_table", "too_large", "units_row"]

@@ -55,7 +55,6 @@ from sblsim.orchestrator.readers.cells import (
     numbers,
     pattern,
     read_text,
-    record_lines,
     shown_header,
     text_table,
     units_row,
@@ -241,8 +240,7 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     name = str(path)
     if rows is None:
         text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
-        header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)
-        lines = record_lines(text, lines)  # a quoted comment over lines: each row named by the line it starts on
+        header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)  # a row's line: where it starts
         del text
     else:
         header, body, lines = rows
