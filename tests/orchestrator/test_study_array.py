@@ -112,11 +112,14 @@ def test_the_frame_is_chosen_over_the_used_deployments(tmp_path):
     written = array.deployments.written()  # every deployment in that frame, the used and the others
     assert np.max(np.hypot(written["x_m"] - x, written["y_m"] - y)) < 1e-3
     assert array.deployments.summary()["frame"]["crs"] == "EPSG:32631"
-    # a frame given is kept, and so are its x and y
-    given = read_deployments(path, frame="EPSG:32617")
+    # a frame given is kept, and so are its x and y (the sheet's deployments near the study: a frame undistorted
+    # over them)
+    near = tmp_path / "near.csv"
+    raw[raw["station"].isin(["A", "B", "C", "F"])].to_csv(near, index=False, float_format="%.10f")
+    given = read_deployments(near, frame="EPSG:32632")
     kept = in_water(data, assign(data, given), given).deployments
-    assert kept.frame.crs == "EPSG:32617" and kept.frame.chosen == CHOSEN_GIVEN
-    assert np.array_equal(kept.table[["x", "y"]].to_numpy(), given.table.loc[[0, 5], ["x", "y"]].to_numpy())
+    assert kept.frame.crs == "EPSG:32632" and kept.frame.chosen == CHOSEN_GIVEN
+    assert np.array_equal(kept.table[["x", "y"]].to_numpy(), given.table.loc[[0, 3], ["x", "y"]].to_numpy())
 
 
 def _network(sim, count: int, seed: int = 2) -> pd.DataFrame:
