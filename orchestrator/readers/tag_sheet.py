@@ -15,8 +15,15 @@ One row per transmitter (header names matched case-insensitively, a trailing uni
 * a sensor: ``sensor_type`` (``P``/``pressure``/``depth``, ``T``/``temperature``, ``A``/``acceleration``),
   ``sensor_slope`` and ``sensor_intercept`` (Vemco's ``Slope``, ``Intercept``): a raw value ``r`` the detections
   carry (VUE's ``ADC`` unit, Fathom's ``Raw Data``) is ``slope × r + intercept`` in the sensor's unit (a depth in
-  metres, positive down); a value a file gives converted (unit ``m``) is taken as it is;
+  metres, positive down; a ``sensor_unit`` given for a depth sensor must be metres); a value a file gives converted
+  (unit ``m``) is taken as it is;
 * ``name`` (or ``animal_id``): a label kept in the outputs.
+
+The sheet may also be a workbook (``.xls``, ``.xlsx``: :mod:`.workbook`): Innovasea's tag specifications (sheet
+``Tag Summary``: ``VUE Tag ID``, each step's ``Min Delay`` and ``Max Delay``, ``Sensor type``, ``Units``, ``Slope``,
+``Intercept``), OTN's tagging metadata (sheet ``Tag Metadata``: ``TAG_CODE_SPACE``, ``TAG_ID_CODE``, ``ANIMAL_ID``)
+or a sheet with the columns above; or OTN's tag releases table (``tag_device_id``: :mod:`.otn_tags`). A receiver's
+binary log (VRL, VDAT) is refused, named (:mod:`.binary`).
 """
 
 from __future__ import annotations
@@ -30,10 +37,22 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.schedule import PING_TYPES
 from sblsim.orchestrator.io.paths import inside
+from sblsim.orchestrator.readers.binary import LOGS, first_bytes, kind_of, log_refused
 from sblsim.orchestrator.readers.burst_sequence import BURST_RANGE, read_burst_sequence
-from sblsim.orchestrator.readers.cells import named, numbers, pattern, read_text, refuse, shown_header, text_table
+from sblsim.orchestrator.readers.cells import (
+    UNITS,
+    named,
+    numbers,
+    pattern,
+    read_text,
+    refuse,
+    shown_header,
+    text_table,
+)
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
+from sblsim.orchestrator.readers.otn_tags import otn_table, releases
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
+from sblsim.orchestrator.readers.workbook import located, read_workbook
 
 #: The most transmitters a sheet lists.
 MAX_TAGS = 10_000
@@ -56,7 +75,7 @@ ALIASES = {
     "burst_sequence": ("burst_sequence", "sequence"), "role": ("role",), "motion": ("motion",),
     "sensor_type": ("sensor_type",), "slope": ("sensor_slope", "slope"), "intercept": ("sensor_intercept",
                                                                                        "intercept"),
-    "name": ("name", "animal_id"),
+    "name": ("name", "animal_id"), "unit": ("sensor_unit", "sensor_units"),
 }
 
 
@@ -163,19 +182,62 @@ class TagSheet:
 
 
 def read_tag_sheet(path: Path | str) -> TagSheet:
-    """Read a tag sheet (the module docstring).
+    """Read a tag sheet (the module docstring): a CSV, Innovasea's or OTN's workbook (:mod:`.workbook`), or OTN's
+    tag releases table (:mod:`.otn_tags`), told by the file's first bytes and its header.
 
     Raises
     ------
     ModelError
-        One line naming the file, its line and column and the allowed values: no transmitter column, a cell outside
-        its pattern or range, a transmitter listed twice, a ping type its figures contradict, a sequence file
-        outside the sheet's folder.
+        One line naming the file, its line (a workbook's sheet and row) and column and the allowed values: no
+        transmitter column, a cell outside its pattern or range, a transmitter listed twice, a ping type its figures
+        contradict, a sequence file outside the sheet's folder, a depth sensor's unit that is not metres; a
+        receiver's binary log (:mod:`.binary`).
     """
     path, what = Path(path), "tags"
     name = str(path)
+    kind = kind_of(first_bytes(path, what), path.suffix)
+    if kind in LOGS:
+        raise log_refused(name, what, kind)
+    if kind in ("xls", "xlsx"):
+        table = read_workbook(path, kind, what, ALIASES["transmitter"], MAX_TAGS)
+        with located(name, table.sheet):
+            return tag_table(table.header, table.body, table.lines, path, what, table.index)
     header, body, lines = text_table(read_text(path, what, MAX_DETECTION_BYTES, MAX_TAGS), name, what, MAX_TAGS)
-    index = {key: named(header, aliases) for key, aliases in ALIASES.items()}
+    index = None
+    if otn_table(header) is not None:
+        body, lines, index = releases(header, body, lines, name, what)
+    return tag_table(header, body, lines, path, what, index)
+
+
+def tag_table(header: list[str], body: pd.DataFrame, lines: list[int], path: Path, what: str,
+              index: dict[str, int | None] | None = None) -> TagSheet:
+    """A tag sheet's rows (text cells, each row's line) checked into :class:`TagSpec` s.
+
+    Parameters
+    ----------
+    header : list of str
+        The column names.
+    body : pandas.DataFrame
+        The rows, every cell a str.
+    lines : list of int
+        Each row's line in the file.
+    path : Path
+        The sheet (its folder: a ``burst_sequence`` file's).
+    what : str
+        What the file is, as a refusal names it.
+    index : dict, optional
+        Each field (a key of :data:`ALIASES`) to its column, for a layout whose names are not the sheet's (a field
+        not in it is not read); default: each field by its names in :data:`ALIASES`.
+
+    Raises
+    ------
+    ModelError
+        As :func:`read_tag_sheet`.
+    """
+    name = str(path)
+    if index is None:
+        index = {key: named(header, aliases) for key, aliases in ALIASES.items()}
+    index = {key: index.get(key) for key in ALIASES}
     if index["transmitter"] is None:
         raise ModelError(f"{what}: {name!r}: the header needs a transmitter column (a full ID or an id per row); got "
                          f"{shown_header(header)}")
@@ -218,6 +280,12 @@ def read_tag_sheet(path: Path | str) -> TagSheet:
     roles = choice("role", ROLES, "animal")
     motions = choice("motion", MOTIONS, "")
     sensors = choice("sensor_type", SENSORS, "")
+    units = text("unit")
+    wrong = np.flatnonzero([s == "depth" and u.lower() not in UNITS["metres"] + ("",) for s, u in zip(sensors, units)])
+    if len(wrong):
+        k = int(wrong[0])
+        raise refuse(what, name, lines[k], header[index["unit"]], units.iloc[k], "a depth sensor's unit: "
+                     + ", ".join(UNITS["metres"][:3]) + " or empty (the value slope x raw + intercept, in metres)")
     sequences = text("burst_sequence")
     labels = text("name").str.slice(0, 80)
     tags = []
@@ -256,4 +324,4 @@ def spec_for(sheet: TagSheet | None, transmitter: str) -> TagSpec:
 
 
 __all__ = ["ALIASES", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec", "read_tag_sheet",
-           "spec_for"]
+           "spec_for", "tag_table"]
