@@ -27,6 +27,8 @@ from sblsim.orchestrator.tracks.outputs import scale_bar, write
 #: The characters of a line of the text beside the map; a receiver's label's offsets from it [pt], tried in turn.
 PANEL_WIDTH = 46
 LABEL_CORNERS = ((3, 3), (3, -3), (-3, 3), (-3, -3))
+#: The most receivers' labels tried (the most detections first): more are not read on a map.
+MAX_LABELS = 80
 
 
 def _heard(outcome: StudyOutcome) -> dict[str, list[str]]:
@@ -127,27 +129,32 @@ def _north(ax, frame, x: float, y: float) -> list:
 
 
 def _thin_labels(ax, renderer, texts: list, fixed: list) -> int:
-    """Each receiver's label (in ``texts``' order: the most detections first) put at the first of its corners
-    (upper right, lower right, upper left, lower left) where it stays inside the map and overlaps no label put
-    before, no receiver's marker and none of the ``fixed`` artists (the scale bar, the north arrow), by their
-    extents as matplotlib draws them; removed where none is free. The count kept."""
-    from matplotlib.transforms import Bbox
-
+    """Each receiver's label (in ``texts``' order: the most detections first; at most :data:`MAX_LABELS` tried) put
+    at the first of its corners (upper right, lower right, upper left, lower left) where it stays inside the map and
+    overlaps no label put before, no receiver's marker and none of the ``fixed`` artists (the scale bar, the north
+    arrow), by their extents as matplotlib draws them; removed where none is free. The count kept."""
     half = 2.5 / 72 * ax.figure.dpi  # a marker's half width [px]
-    markers = [Bbox([[x - half, y - half], [x + half, y + half]])
-               for x, y in ax.transData.transform(np.array([t.xy for t in texts]).reshape(-1, 2))]
-    kept = [a.get_window_extent(renderer) for a in fixed]
+    centres = ax.transData.transform(np.array([t.xy for t in texts]).reshape(-1, 2))
+    markers = np.column_stack([centres - half, centres + half])  # (n, 4): x0, y0, x1, y1 [px]
+    kept = np.array([a.get_window_extent(renderer).extents for a in fixed]).reshape(-1, 4)
     occupied, inside = len(kept), ax.get_window_extent(renderer)
+
+    def free(box: np.ndarray, others: np.ndarray) -> bool:
+        return not np.any((box[0] < others[:, 2]) & (others[:, 0] < box[2]) & (box[1] < others[:, 3])
+                          & (others[:, 1] < box[3]))
+
     for k, text in enumerate(texts):
+        if k >= MAX_LABELS:
+            text.remove()
+            continue
         text.set_visible(True)
         for dx, dy in LABEL_CORNERS:
             text.xyann = (dx, dy)
             text.set(ha="left" if dx > 0 else "right", va="bottom" if dy > 0 else "top")
-            box = text.get_window_extent(renderer).expanded(1.05, 1.1)
-            within = inside.x0 <= box.x0 and box.x1 <= inside.x1 and inside.y0 <= box.y0 and box.y1 <= inside.y1
-            if within and not any(box.overlaps(other) for other in kept) and \
-                    not any(box.overlaps(m) for j, m in enumerate(markers) if j != k):
-                kept.append(box)
+            box = text.get_window_extent(renderer).expanded(1.05, 1.1).extents
+            within = inside.x0 <= box[0] and box[2] <= inside.x1 and inside.y0 <= box[1] and box[3] <= inside.y1
+            if within and free(box, kept) and free(box, np.delete(markers, k, axis=0)):
+                kept = np.vstack([kept, box])
                 break
         else:
             text.remove()
