@@ -19,6 +19,7 @@ from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
 
@@ -38,7 +39,9 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
                       reference: str | None = None, **options: Any) -> SyncOutcome:
     """:func:`synchronise` on a study's receivers (a
     :class:`~sblsim.orchestrator.readers.deployments.Deployments`): each detection at its deployment first (the
-    others set aside, counted in ``summary["set_aside"]``), the frame and the deployments in
+    others set aside, counted in ``summary["set_aside"]``), only the deployments that logged a kept detection taken
+    (:func:`~sblsim.orchestrator.readers.in_water.in_water`: the frame chosen again over them where it was chosen
+    automatically; the others listed in ``summary["receivers_file"]``), the frame and the deployments in
     ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
     the frame is known; ``options`` as :func:`synchronise` takes them.
 
@@ -47,11 +50,14 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     ModelError
         As :func:`synchronise`, or no detection inside a deployment.
     """
-    assigned = assign(detections, deployments)
+    array = in_water(detections, assign(detections, deployments), deployments)  # the deployments that logged it
+    deployments, assigned = array.deployments, array.assigned
     outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
                           **options)
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
+    if array.line():
+        outcome.summary.setdefault("notes", []).append(array.line())
     frame = deployments.frame
     if outcome.positions is not None and frame is not None:
         outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),

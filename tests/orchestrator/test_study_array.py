@@ -188,3 +188,18 @@ def test_the_network_s_other_deployments_are_listed_as_not_used(twice):
     assert study["not_used"] == {"count": 152, "serial_never_detected": 150, "outside_detections_span": 2}
     said = [n for n in summary["notes"] if f"{len(sim.deployments)} of {len(network)} deployments" in n]
     assert len(said) == 1 and "152 not used (150 serial never detected, 2 outside the detections' time span)" in said[0]
+
+
+def test_sblsim_sync_takes_the_same_array(twice):
+    """``sblsim sync`` on the network's sheet synchronises the study's own deployments only, as the study does: the
+    same clocks as with the study's own sheet, the others said in a note."""
+    from sblsim.orchestrator.readers.detections import read_detections
+    from sblsim.orchestrator.sync.study_sync import synchronise_study
+
+    sim, network, _, folder = twice
+    data = read_detections(folder / "files" / "detections.csv", None)
+    own = synchronise_study(data, read_deployments(folder / "files" / "deployments.csv"))
+    more = synchronise_study(data, read_deployments(folder / "network.csv"))
+    pd.testing.assert_frame_equal(own.offsets.drop(columns="receiver"), more.offsets.drop(columns="receiver"))
+    assert more.summary["receivers_file"]["used"] == len(sim.deployments)
+    assert any(f"{len(sim.deployments)} of {len(network)} deployments" in n for n in more.summary["notes"])
