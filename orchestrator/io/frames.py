@@ -209,10 +209,10 @@ def check_scale(crs: str, lat: np.ndarray, lon: np.ndarray, where: str) -> None:
                      f"allowed: a metric frame whose scale there is within {MAX_SCALE_ERROR:.1%} of 1,{suggestion}")
 
 
-def frame_for(lat: np.ndarray, lon: np.ndarray, given: str | None = None) -> Frame:
+def frame_for(lat: np.ndarray, lon: np.ndarray, given: str | None = None, check: bool = True) -> Frame:
     """The frame of points given as WGS 84 latitude and longitude: ``given`` (a metric CRS whose scale over the
-    points is within :data:`MAX_SCALE_ERROR` of 1: :func:`check_scale`) or the UTM zone of their centre (the middle
-    of their extent).
+    points is within :data:`MAX_SCALE_ERROR` of 1: :func:`check_scale`; ``check`` False leaves that to the caller,
+    who knows which of the points are used) or the UTM zone of their centre (the middle of their extent).
 
     Raises
     ------
@@ -222,7 +222,7 @@ def frame_for(lat: np.ndarray, lon: np.ndarray, given: str | None = None) -> Fra
     ok = np.isfinite(lat) & np.isfinite(lon)
     if given is not None:
         frame = Frame(check_metric(given, "frame"), CHOSEN_GIVEN)
-        if ok.any():
+        if ok.any() and check:
             check_scale(frame.crs, np.asarray(lat, float), np.asarray(lon, float), "frame")
         return frame
     if not ok.any():

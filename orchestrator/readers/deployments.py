@@ -39,14 +39,18 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.frames import (
+    CHOSEN_GIVEN,
     CHOSEN_INPUT,
     CHOSEN_UTM,
+    MAX_SCALE_ERROR,
     Frame,
     check_crs,
     check_latlon,
     check_metric,
+    check_scale,
     frame_for,
     is_geographic,
+    scale_range,
     transform,
 )
 from sblsim.orchestrator.io.times import iso_utc, utc_seconds
@@ -187,6 +191,8 @@ class Deployments:
             raise ModelError(f"receivers: no deployment of {self.source!r} is in use; allowed: deployments that "
                              "logged the detections")
         table, frame = self.table, self.frame
+        if frame is not None and frame.chosen == CHOSEN_GIVEN:  # a frame given: its scale over the array used
+            check_scale(frame.crs, table["lat"].to_numpy(float)[keep], table["lon"].to_numpy(float)[keep], "frame")
         if frame is not None and frame.chosen == CHOSEN_UTM and not keep.all():
             lat, lon = table["lat"].to_numpy(float), table["lon"].to_numpy(float)
             chosen = frame_for(lat[keep], lon[keep])
@@ -293,7 +299,7 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
         check_latlon(lat, lon, f"{what}: {name!r}", lines)
         if crs is not None and check_crs(crs, "crs") not in ("EPSG:4326", "epsg:4326"):
             lon, lat = transform(crs, "EPSG:4326", lon, lat)
-        chosen = frame_for(lat, lon, frame)
+        chosen = frame_for(lat, lon, frame, check=False)  # a given frame's scale: over the array used (restricted)
         x, y = chosen.from_latlon(lat, lon)
         if projected:
             notes.append(f"the columns {header[index['x']]}, {header[index['y']]} ignored: the positions are "
@@ -312,6 +318,14 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
             if frame is not None:
                 x, y = transform(crs, chosen.crs, x, y)
             lat, lon = chosen.to_latlon(x, y)
+            low, high = scale_range(chosen.crs, lat, lon)
+            if frame is None and not max(abs(low - 1), abs(high - 1)) <= MAX_SCALE_ERROR:
+                utm = frame_for(lat, lon)  # the positions' CRS distorts them: taken to the array's UTM zone
+                x, y = utm.from_latlon(lat, lon)
+                notes.append(f"the positions' CRS {crs[:40]} scales distances by {low:.6g} to {high:.6g} over the "
+                             f"array: projected to {utm.crs} (the UTM zone of the array's centre), whose metres are "
+                             "the ground's within 0.1 %")
+                chosen = utm
     z = values("z", -DEPTH_RANGE[1], -DEPTH_RANGE[0], "m (up)")
     if index["z"] is None and index["depth"] is not None:
         z = -values("depth", *DEPTH_RANGE, "m (positive down)")

@@ -58,3 +58,45 @@ def test_the_study_refuses_web_mercator_before_any_work(tmp_path):
     assert len(lines) == 1 and "EPSG:3857" in lines[0] and "scales distances by" in lines[0]
     assert not (tmp_path / "out").exists()
 
+
+
+def _sheet(tmp_path, rows, columns):
+    import pandas as pd
+
+    path = tmp_path / "deployments.csv"
+    pd.DataFrame(rows, columns=columns).to_csv(path, index=False, float_format="%.10f")
+    return path
+
+
+def test_a_given_frame_is_judged_over_the_deployments_used(tmp_path):
+    """A network's sheet spans zones; the frame given fits the study's own deployments: taken. Used where it does
+    not fit: refused naming its scale (in_water's restriction, as the study and the sync take it)."""
+    from sblsim.orchestrator.readers.deployments import read_deployments
+
+    rows = [("1", 60.38, 5.33), ("2", 60.39, 5.34), ("3", 44.5, -82.5)]  # Norway, and a receiver on the Great Lakes
+    sheet = read_deployments(_sheet(tmp_path, rows, ["serial", "lat", "lon"]), frame="EPSG:32631")
+    kept = sheet.restricted(np.array([True, True, False]))
+    assert kept.frame.crs == "EPSG:32631" and len(kept.table) == 2
+    with pytest.raises(ModelError, match="EPSG:32631.*scales distances by"):
+        sheet.restricted(np.array([True, False, True]))
+
+
+def test_positions_in_a_distorting_crs_are_taken_to_the_arrays_utm_zone(tmp_path):
+    """x, y given in ETRS89 / UTM 33N for an array at 5.3° E (scale 1.0031 there): projected to UTM 31N (pyproj's
+    own transformation the reference), said in a note; in UTM 31N itself, kept as given."""
+    from pyproj import Transformer
+
+    from sblsim.orchestrator.readers.deployments import read_deployments
+
+    lat, lon = np.array([60.38, 60.39]), np.array([5.33, 5.35])
+    x33, y33 = Transformer.from_crs("EPSG:4326", "EPSG:25833", always_xy=True).transform(lon, lat)
+    path = _sheet(tmp_path, list(zip(["1", "2"], x33, y33)), ["serial", "x_m", "y_m"])
+    taken = read_deployments(path, crs="EPSG:25833")
+    x31, y31 = Transformer.from_crs("EPSG:4326", "EPSG:32631", always_xy=True).transform(lon, lat)
+    assert taken.frame.crs == "EPSG:32631"
+    assert np.allclose(taken.table["x"], x31, atol=1e-3) and np.allclose(taken.table["y"], y31, atol=1e-3)
+    assert any("EPSG:25833" in n and "EPSG:32631" in n for n in taken.notes)
+    path = _sheet(tmp_path, list(zip(["1", "2"], x31, y31)), ["serial", "x_m", "y_m"])
+    kept = read_deployments(path, crs="EPSG:32631")
+    assert kept.frame.crs == "EPSG:32631" and np.allclose(kept.table["x"], x31, atol=1e-6)
+    assert not any("scales distances" in n for n in kept.notes)

@@ -46,12 +46,17 @@ def test_lat_lon_are_projected_to_the_utm_zone_of_the_centre_to_the_millimetre(t
     assert given.frame.crs == "EPSG:25832" and np.max(np.hypot(given.table["x"] - x2, given.table["y"] - y2)) < 1e-3
 
 
-def test_projected_positions_stay_in_their_crs_and_gain_lat_lon(tmp_path):
+def test_projected_positions_gain_lat_lon_and_leave_a_crs_that_distorts_them(tmp_path):
+    """The boats' table is in ETRS89 / UTM 33N, whose scale at 5.3° E is 1.0031: its positions are taken to the UTM
+    zone of the array (31N) through latitude and longitude (pyproj's transformations the reference), said."""
     path = tmp_path / "h.csv"
     path.write_text("serial,sync_tag,x_m,y_m\nA,7,-31369.421,6732996.807\nB,,-30820.127,6732778.068\n")
     d = read_deployments(path, crs="EPSG:25833")
-    assert d.frame.crs == "EPSG:25833" and np.array_equal(d.table["x"], [-31369.421, -30820.127])
-    lon, lat = Transformer.from_crs("EPSG:25833", "EPSG:4326", always_xy=True).transform(d.table["x"], d.table["y"])
+    lon, lat = Transformer.from_crs("EPSG:25833", "EPSG:4326", always_xy=True).transform([-31369.421, -30820.127],
+                                                                                          [6732996.807, 6732778.068])
+    x, y = Transformer.from_crs("EPSG:4326", "EPSG:32631", always_xy=True).transform(lon, lat)
+    assert d.frame.crs == "EPSG:32631" and any("EPSG:25833" in n for n in d.notes)
+    assert np.allclose(d.table["x"], x, rtol=0, atol=1e-3) and np.allclose(d.table["y"], y, rtol=0, atol=1e-3)
     assert np.allclose(d.table["lat"], lat, rtol=0, atol=1e-9) and np.allclose(d.table["lon"], lon, rtol=0, atol=1e-9)
     moved = read_deployments(path, crs="EPSG:25833", frame="EPSG:32631")
     x, y = Transformer.from_crs("EPSG:25833", "EPSG:32631", always_xy=True).transform([-31369.421], [6732996.807])
