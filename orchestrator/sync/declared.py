@@ -166,7 +166,9 @@ def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float,
     if typical <= SPREAD_FACTOR * crossing + tolerance:
         return
     ratio = typical / max(crossing, 1e-12)  # a spread is below the array's true crossing: a lower bound of the factor
-    unit = ("degrees (latitude and longitude)" if ratio > 1e4 and looks_like_degrees(x, y) else "kilometres"
+    # the spread is a lower bound of the factor (a ping is heard across part of the array): a table of degrees may
+    # show a few thousand, not the 10⁵ a degree is in metres; its values tell it
+    unit = ("degrees (latitude and longitude)" if ratio >= 100 and looks_like_degrees(x, y) else "kilometres"
             if ratio >= 100 else "another array's, or not metres")
     raise ModelError(f"receivers {source!r}: the tag's pings reach the receivers over {typical * 1e3:.4g} ms "
                      f"(median), more than the {crossing * 1e3:.4g} ms sound takes across the table's positions; "

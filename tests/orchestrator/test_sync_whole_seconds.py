@@ -18,6 +18,7 @@ from sblsim.models.errors import ModelError
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.sync import run
+from sblsim.orchestrator.sync.declared import check_arrival_spread
 
 #: The simulated files' epoch [s since 1970 UTC].
 EPOCH = 1_700_000_000
@@ -98,6 +99,17 @@ def test_degrees_under_metre_columns_exit_2_not_a_traceback(sim, tmp_path, capsy
     detections, receivers = _files(tmp_path / "in", sim, degrees=True, sync_tags=sync_tags)
     line = _refused(capsys, detections, receivers, tmp_path / "out")
     assert "receivers.csv'" in line and "look like degrees" in line, line
+
+
+def test_toa_names_degrees_by_their_values():
+    """``sblsim toa``'s check of one tag's arrivals: the boats' pings spread over 71 ms where a table of degrees
+    under x_m, y_m makes the crossing 0.012 ms (a factor of 6,000, the spread a lower bound of the 10⁵): named
+    degrees by the values (kilometres before); the same factor on a table in metres' values: kilometres."""
+    lon, lat = np.array([5.335, 5.341, 5.350]), np.array([60.380, 60.384, 60.381])
+    with pytest.raises(ModelError, match="look like degrees"):
+        check_arrival_spread(np.full(5, 71e-3), 0.012e-3, 0.0, "r.csv", lon, lat)
+    with pytest.raises(ModelError, match="look like kilometres"):
+        check_arrival_spread(np.full(5, 71e-3), 0.012e-3, 0.0, "r.csv", lon * 1e3, lat * 1e3)
 
 
 def test_feet_are_refused_naming_feet(sim, tmp_path, capsys, no_fit):
