@@ -94,6 +94,11 @@ def resolution_warning(times: np.ndarray, travel_time: float, sound_speed: float
             "detections with their sub-second times")
 
 
+class RoundingError(ModelError):
+    """Times rounded too coarsely to synchronise clocks from (:func:`check_resolution`): a refusal of the
+    synchronisation that a study may take as clocks not synchronised, each tag then saying what that allows."""
+
+
 def check_resolution(times: np.ndarray, travel_time: float, sound_speed: float, what: str) -> float:
     """Refuse times rounded too coarsely to synchronise clocks from (module docstring): the rounding's σ not below
     :data:`RESOLVABLE` of the largest travel time across the array.
@@ -116,7 +121,7 @@ def check_resolution(times: np.ndarray, travel_time: float, sound_speed: float, 
 
     Raises
     ------
-    ModelError
+    RoundingError
         One line naming ``what``, the rounding (whole seconds, tenths, ...) as the cause, its σ in milliseconds and
         metres against the travel time across the array, and the rounding allowed.
     """
@@ -126,7 +131,7 @@ def check_resolution(times: np.ndarray, travel_time: float, sound_speed: float, 
         return q
     name = QUANTUM_NAMES.get(q, f"multiples of {q:g} s")
     finest = RESOLVABLE * travel_time * np.sqrt(12.0)
-    raise ModelError(f"{what}: every time is a whole multiple of {q:g} s ({name}: a rounding error of "
+    raise RoundingError(f"{what}: every time is a whole multiple of {q:g} s ({name}: a rounding error of "
                      f"{1000 * sigma:.3g} ms, {sigma * sound_speed:.3g} m of range, where sound crosses the array in "
                      f"{1000 * travel_time:.3g} ms): the clocks cannot be synchronised from these times (the "
                      "rounding is the cause, not the receivers' positions); allowed: detections with their sub-second "
@@ -178,5 +183,5 @@ def residual_warning(quanta: np.ndarray, residuals: np.ndarray, receivers: list[
             "position from them; export the detections with their sub-second times")
 
 
-__all__ = ["QUANTA", "QUANTUM_NAMES", "RESOLVABLE", "check_resolution", "resolution_warning", "residual_warning",
-           "rounding_sigma", "time_quantum"]
+__all__ = ["QUANTA", "QUANTUM_NAMES", "RESOLVABLE", "RoundingError", "check_resolution", "resolution_warning",
+           "residual_warning", "rounding_sigma", "time_quantum"]

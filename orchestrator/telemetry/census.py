@@ -171,7 +171,8 @@ def _listed(counts: dict[str, int], limit: int = 6) -> str:
     return ", ".join(shown) + (f" and {more} more" if more > 0 else "")
 
 
-def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tuple[str, str] | None:
+def verdict(census: Census, times: np.ndarray, stationary: bool = False, unsynchronisable: bool = False
+            ) -> tuple[str, str] | None:
     """The first reason (the module docstring's order) a tag cannot be positioned: its ``reason_code`` and its one
     line, with the counts; None where it can be tried.
 
@@ -182,6 +183,10 @@ def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tupl
         (n,) [s] its detections' times as logged (their rounding).
     stationary : bool
         A still tag (a reference tag): one position from all its pings, no tracker to start.
+    unsynchronisable : bool
+        The study's sync tags could not synchronise the clocks from times rounded so coarsely (the clocks taken as
+        logged): the rounding is the reason once enough receivers heard the tag, before its pings are judged (their
+        arrivals, on clocks seconds apart, are no pings' then).
     """
     need, heard = census.need, census.per_receiver
     at_once = f"positioning needs {need} at once"
@@ -196,6 +201,8 @@ def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tupl
             f"heard by {len(heard)} receivers, {len(census.synchronised)} of them on a synchronised clock "
             f"({', '.join(census.synchronised) or 'none'}; not synchronised, detections {_listed(alone)}): {at_once}; "
             "allowed: their sync tags heard by the others (the deployments' transmitter column), or --sync DIR")
+    if unsynchronisable:
+        return "whole_seconds_unsynchronised", _rounded(census, "the sync tags could not set the clocks from them")
     if census.at_once < MIN_AT_ONCE:
         most = f"never more than {census.most} at once" if census.most < need else f"at most {census.most} at once"
         return "too_few_receivers_at_once", (
@@ -208,16 +215,23 @@ def verdict(census: Census, times: np.ndarray, stationary: bool = False) -> tupl
             f"the tracker starts from a ping heard by {need + 1} (a position with an arrival to check it)")
     if census.logged and census.quantum >= 1.0 and resolution_warning(times, census.crossing, NOMINAL_SOUND_SPEED,
                                                                        "") is not None:
-        q = census.quantum
-        whole = "whole-second" if q == 1.0 else f"whole-{q:g}-second"
-        return "whole_seconds_unsynchronised", (
-            f"{whole}, unsynchronised times: {q:g} s is {q * NOMINAL_SOUND_SPEED:,.0f} m of range at "
-            f"{NOMINAL_SOUND_SPEED:,.0f} m/s (the rounding alone {q / np.sqrt(12.0):.2g} s, "
-            f"{q / np.sqrt(12.0) * NOMINAL_SOUND_SPEED:,.0f} m, one standard deviation), where sound crosses the "
-            f"receivers that hear one of its pings at once in {1000 * census.crossing:,.0f} ms (the median) and no "
-            "sync tag set their clocks; allowed: the detections exported with their sub-second times, or the "
-            "deployments' sync tags (transmitter column)")
+        return "whole_seconds_unsynchronised", _rounded(census, "no sync tag set their clocks",
+                                                        ", or the deployments' sync tags (transmitter column)")
     return None
+
+
+def _rounded(census: Census, clocks: str, also: str = "") -> str:
+    """The whole-seconds reason's line: the rounding in range, against the array's crossing time, why the clocks are
+    not synchronised (``clocks``) and what else would allow positions (``also``)."""
+    q = census.quantum
+    whole = "whole-second" if q == 1.0 else f"whole-{q:g}-second"
+    crossing = (f", where sound crosses the receivers that hear one of its pings at once in "
+                f"{1000 * census.crossing:,.0f} ms (the median)" if np.isfinite(census.crossing) and census.crossing > 0
+                else "")
+    return (f"{whole}, unsynchronised times: {q:g} s is {q * NOMINAL_SOUND_SPEED:,.0f} m of range at "
+            f"{NOMINAL_SOUND_SPEED:,.0f} m/s (the rounding alone {q / np.sqrt(12.0):.2g} s, "
+            f"{q / np.sqrt(12.0) * NOMINAL_SOUND_SPEED:,.0f} m, one standard deviation){crossing}, and {clocks}; "
+            f"allowed: the detections exported with their sub-second times{also}")
 
 
 def code_of(reason: str) -> str:

@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.assign import assign
@@ -107,6 +108,10 @@ class StudyOutcome:
     sync: Any = None
 
 
+#: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
+TOO_COARSE = "as logged (times too coarse to synchronise)"
+
+
 def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
             series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
     """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
@@ -120,24 +125,31 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
         return clocks, table, {"source": "given", "folder": str(sync_dir), "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
+    rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
-        outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
-        s = outcome.summary
-        notes.extend(s.get("warnings", []))  # each clock break found, in one line
-        return offsets_clocks(outcome.offsets), table, {
-            "source": "synchronised here", "reference_receiver": s["reference_receiver"],
-            "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
-            "clock_breaks": s["clock_breaks"],
-            "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
-            "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
+        try:
+            outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
+        except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
+            rounded = str(exc)
+        else:
+            s = outcome.summary
+            notes.extend(s.get("warnings", []))  # each clock break found, in one line
+            return offsets_clocks(outcome.offsets), table, {
+                "source": "synchronised here", "reference_receiver": s["reference_receiver"],
+                "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
+                "clock_breaks": s["clock_breaks"],
+                "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
+                "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
     times = assigned.detections.frame["time"].to_numpy(float)
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
-    notes.append("one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
+    notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
+                 "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
                  "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
+    source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone
+              else "as logged (no sync tag)")
     return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
-        table, {"source": "as logged (one receiver)" if alone else "as logged (no sync tag)",
-                "receivers": int(len(table)), "not_synchronised": []}, None
+        table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
 
 
 def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Detections,
@@ -291,7 +303,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
             row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
                     "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
-            found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary")
+            found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary",
+                            clocks_info["source"] == TOO_COARSE)
             if found is not None:
                 rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
                     counted.pings, counted.at_once, found[0])

@@ -35,6 +35,9 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
     elif "one receiver" in c["source"]:
         out.append("  clock taken as logged (one receiver: no other to synchronise it against)")
+    elif "too coarse" in c["source"]:
+        out.append("  clocks taken as logged: the sync tags' times are rounded too coarsely to synchronise them "
+                   "(the note below)")
     else:
         out.append("  clocks taken as logged (no sync tag in the receivers file)")
     if "toa_noise" in s:

@@ -216,3 +216,20 @@ def test_an_interval_too_few_steps_show_names_the_tag_sheet(tmp_path):
         assert row.status == "refused", row
         assert row.reason_code == "interval_unknown" and row.pings_at_once >= 3
         assert "--ping-type" not in row.reason and "the tag sheet's ping_type" in row.reason
+
+
+def test_whole_second_times_the_sync_tags_cannot_synchronise(tmp_path):
+    """The same study rounded to whole seconds WITH its sync tags: the synchronisation refuses the times (the rounding
+    named), the study goes on with the clocks as logged (said) and every animal is a row whose reason is the
+    rounding, not a count of pings that clocks seconds apart split: exit 0, nothing positioned."""
+    sim = simulate_study(n_receivers=9, n_tags=3, days=0.1, redeployed=0, seed=6)
+    files = sim.write(tmp_path / "files", "vue")
+    d = sim.detections.assign(time=np.floor(sim.detections["time"].to_numpy()))
+    files["detections"].write_text(vue_text(d))
+    result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=1)
+    check_tag_rows(result.tags, result.tracks, _given(files))
+    assert result.summary["clocks"]["source"] == "as logged (times too coarse to synchronise)"
+    assert any("cannot be synchronised" in n and "whole seconds" in n for n in result.summary["notes"])
+    assert len(result.tracks) == 0 and (result.tags["reason_code"] == "whole_seconds_unsynchronised").all()
+    assert all("the sync tags could not set the clocks" in r and "sync tags (transmitter" not in r
+               for r in result.tags["reason"])
