@@ -196,7 +196,9 @@ def test_a_zip_bomb_is_refused_before_it_is_opened(tmp_path, monkeypatch):
     path, _ = _summary(tmp_path, "xlsx")
     with zipfile.ZipFile(path) as archive:
         unpacked = sum(m.file_size for m in archive.infolist())
-    monkeypatch.setattr(workbook.openpyxl, "load_workbook", lambda *a, **k: pytest.fail("opened"))
+    import openpyxl
+
+    monkeypatch.setattr(openpyxl, "load_workbook", lambda *a, **k: pytest.fail("opened"))
     monkeypatch.setattr(workbook, "MAX_UNPACKED_BYTES", unpacked - 1)
     assert "MiB unpacked" in _refused(path)
     monkeypatch.setattr(workbook, "MAX_UNPACKED_BYTES", unpacked)
