@@ -23,6 +23,7 @@ from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.logs.replay_result import ReplayResult, _replay_plan
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.tracks.format_options import refuse_toa_only, toa_arguments
 from sblsim.orchestrator.tracks.many import tag_files, track_tags
 from sblsim.orchestrator.tracks.options import PING_TYPE_NAMES, check_depth_sigma
@@ -87,13 +88,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim replay``'s arguments."""
     p.add_argument("log", type=Path, help="the log: .csv or .parquet (sblsim run --export-log writes one); with "
                    "--format toa, the matrix of times of arrival (docs/tracking.md), or a folder of one per tag")
-    p.add_argument("--format", choices=("log", "toa", "detections", "yaps", "vue", "fathom", "glatos", "otn"),
+    p.add_argument("--format", choices=("log", "toa", "detections", *FORMATS),
                    default="log",
                    help="log: a receiver's log (default); toa: times of arrival of a pinger at a fixed array "
                         "(an inverted LBL), tracked by the single-ping fix, the EKF and (--smooth) the RTS and robust "
-                        "smoothers; detections (the format read from the file's first line), yaps, vue, fathom, "
-                        "glatos or otn: raw detections, with --sync and --tag, made into the tag's times of arrival "
-                        "as sblsim toa makes them, then tracked")
+                        "smoothers; detections (the format read from the file's first line), "
+                        f"{', '.join(FORMATS)}: raw detections, with --sync and --tag, made into the tag's times of "
+                        "arrival as sblsim toa makes them, then tracked")
     p.add_argument("--sync", type=Path, default=None, metavar="DIR",
                    help="raw detections: the synchronisation's folder (sblsim sync --out DIR)")
     p.add_argument("--tag", default=None, metavar="ID", help="raw detections: the tag's full ID or id")
@@ -187,15 +188,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim replay`` from its parsed arguments: its lines printed, its exit status returned."""
-    if args.format in ("detections", "yaps", "vue", "fathom", "glatos", "otn"):  # raw detections: the tag's matrix
+    if args.format in ("detections", *FORMATS):  # raw detections: the tag's matrix
         # (sblsim toa), then tracked
         from sblsim.orchestrator.tracks.replay_detections import replay_matrix
 
         with replay_matrix(args) as toa_args:
             return _main_toa(toa_args)
     if args.sync is not None or args.tag is not None:
-        raise ConfigError(f"{'--sync' if args.sync is not None else '--tag'}: only with --format detections, yaps, "
-                          "vue, fathom, glatos or otn (raw detections)")
+        raise ConfigError(f"{'--sync' if args.sync is not None else '--tag'}: only with --format detections, "
+                          f"{', '.join(FORMATS)} (raw detections)")
     if args.format == "toa":
         return _main_toa(args)
     refuse_toa_only(args)

@@ -17,6 +17,7 @@ from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.sync.toa_console import say_warnings
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -25,7 +26,6 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
 
 #: The formats of the detections file (None: read from its first line), the bins' allowed width [h] and the sound
 #: speed's range [m/s].
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)
 #: The survey's horizontal sigma per axis [m] by default and its allowed range (the refinement's prior).
@@ -114,7 +114,7 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         The receivers: ``serial, sync_tag, x_m, y_m[, z_m]`` (or ``x, y, z``), or a study's deployments (``lat``,
         ``lon``, dates, GLATOS and OTN names: :mod:`sblsim.orchestrator.readers.deployments`).
     format : str, optional
-        ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
+        one of :data:`~sblsim.orchestrator.readers.formats.FORMATS`; default read from the file's first line.
     sound_speed : float, optional
         [m/s] in [1300, 1700], constant.
     sound_speed_file : str or Path, optional

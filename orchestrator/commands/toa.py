@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, text_argument
 from sblsim.orchestrator.io.output import folder_name
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.sync.toa_console import run_lines, say_warnings
 from sblsim.orchestrator.tracks.options import PING_TYPE_NAMES, ping_type_arguments
 
@@ -22,7 +23,6 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
 
 #: The detections' formats (None: read from the file's first line).
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn")
 
 
 @dataclass
@@ -74,7 +74,7 @@ def toa(detections: str | Path, *, receivers: str | Path, sync: str | Path, tag:
     tag : str
         The tag: its full ID (``A69-1602-4555``) or its id.
     format : str, optional
-        ``yaps``, ``vue``, ``fathom``, ``glatos`` or ``otn``; default read from the file's first line.
+        one of :data:`~sblsim.orchestrator.readers.formats.FORMATS`; default read from the file's first line.
     ping_type : str, optional
         ``sbi``, ``rbi`` (with ``burst_interval``) or ``pbi`` (with ``burst_sequence``): the shortest burst
         interval, below which a second arrival at one receiver is a multipath echo; default as the detections show

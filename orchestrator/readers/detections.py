@@ -60,11 +60,10 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers import actel, fathom, glatos, network, otn, thelma, vue, yaps
 from sblsim.orchestrator.readers.cells import read_text, text_table
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.readers.transmitters import match
 
-#: The formats of :func:`read_detections`.
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn", "actel", "thelma")
 #: A receiver's time going back in the file's order by at most this much [s] is taken as rows logged within one
 #: timestamp's resolution (a VR2W's 1 ms), the same clock; by more, a reset: a new clock part.
 CLOCK_TOLERANCE = 1e-3

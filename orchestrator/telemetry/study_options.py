@@ -11,10 +11,10 @@ from sblsim.models.tracking.timing import TOA_SIGMA_RANGE
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, names_argument, real_argument, text_argument
 from sblsim.orchestrator.io.frames import check_crs, check_metric
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.local_times import study_zone
 
 #: The detections' formats (None: read from the file's first line).
-FORMATS = ("yaps", "vue", "fathom", "glatos", "otn", "actel", "thelma")
 #: The synchronisation's bins [h] and the sound speeds [m/s] taken.
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)

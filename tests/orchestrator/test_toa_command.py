@@ -258,7 +258,7 @@ def test_replay_of_raw_detections_is_toa_then_the_tracker(tmp_path, capsys, arra
 @pytest.mark.parametrize("args, found", [
     (["--format", "detections", "--tag", "T1"], "--sync: required with --format detections"),
     (["--format", "toa", "--tag", "T1", "--receivers", "x.csv"],
-     "--tag: only with --format detections, yaps, vue, fathom, glatos or otn"),
+     "--tag: only with --format detections, yaps, vue, fathom, glatos, otn, actel, thelma"),
     (["--sync", "somewhere"], "--sync: only with --format detections"),
 ])
 def test_replay_refuses_detection_options_out_of_place(tmp_path, capsys, array, args, found):
