@@ -213,10 +213,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the study's time zone, an IANA name (Europe/Copenhagen): actel's deployments and release "
                         "dates are local times (refused without it unless they carry their UTC offset)")
     p.add_argument("--tags", type=Path, default=None, metavar="SHEET",
-                   help="the tag sheet: transmitter, ping_type (sbi/rbi/pbi), min_delay, max_delay [s], role "
-                        "(animal/sync/reference), sensor_type, sensor_slope, sensor_intercept; or actel's "
-                        "biometrics.csv (default: the workspace's biometrics.csv, else every detected tag that is not "
-                        "a sync tag, its ping type inferred)")
+                   help="the tag sheet: a CSV of transmitter, ping_type (sbi/rbi/pbi), min_delay, max_delay [s], "
+                        "role (animal/sync/reference), sensor_type, sensor_slope, sensor_intercept; Innovasea's tag "
+                        "specification workbook (.xls/.xlsx, its Tag Summary) or OTN's tag metadata workbook; OTN's "
+                        "tag releases table; or actel's biometrics.csv (default: the workspace's biometrics.csv, else "
+                        "every detected tag that is not a sync tag, its ping type inferred)")
     p.add_argument("--tag", default=None, metavar="IDS",
                    help="only these transmitters (full IDs or ids, separated by commas)")
     p.add_argument("--sync", type=Path, default=None, metavar="DIR",
