@@ -153,7 +153,7 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         detections show.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
-        ``tracks.geojson``, ``map.png``, ``sync/``, a folder per tag), all or nothing.
+        ``tracks.geojson``, ``map.png``, ``sync/``, ``tags/``: a folder per tag), all or nothing.
     force : bool
         Replace an earlier study in ``out``.
     progress : bool, str or callable
@@ -278,7 +278,7 @@ def main(args: argparse.Namespace) -> int:
     print(closing_line(outcome.tags, outcome.summary["wall_time_s"], out,
                        f"tracks.csv, tags.csv, receivers.csv, study.json, "
                        f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
-                       f"{'sync/, ' if outcome.sync is not None else ''}a folder per tag"))
+                       f"{'sync/, ' if outcome.sync is not None else ''}tags/: a folder per tag"))
     return 0
 
 

@@ -108,6 +108,9 @@ class StudyOutcome:
     sync: Any = None
 
 
+#: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
+#: never one of the study's own files).
+TAGS_FOLDER = "tags"
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
 
@@ -296,7 +299,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             key = match(name, detected)
             if key is None:
                 raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
-            folder = folder_name(key, "tag")
+            folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"  # never one of the study's own names
             if folder in folders.values():
                 raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
             mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
@@ -447,4 +450,4 @@ def _summary(data: Detections, deployments: Deployments, assigned, clocks: dict[
                      "the synchronisation takes as UTC", "notes": notes}
 
 
-__all__ = ["StudyOutcome", "TAG_COLUMNS", "TRACK_COLUMNS", "combined_tracks", "run_study"]
+__all__ = ["StudyOutcome", "TAGS_FOLDER", "TAG_COLUMNS", "TRACK_COLUMNS", "combined_tracks", "run_study"]
