@@ -67,6 +67,14 @@ class Clocks:
     #: the clock part each segment holds for (1 first); None: every segment part 1.
     parts: np.ndarray | None = None
 
+    def reference(self) -> str | None:
+        """The reference receiver: the one whose clock the synchronisation took as the time base (its offset 0 at
+        every edge, and the only such receiver); None where none or several are (clocks taken as logged)."""
+        rows = np.arange(len(self.knots)) if self.owner is None else self.owner
+        zero = np.all(self.knots == 0.0, axis=1)
+        found = {int(r) for r in rows[zero]} - {int(r) for r in rows[~zero]}
+        return self.receivers[found.pop()] if len(found) == 1 else None
+
     def rows(self, receiver: np.ndarray, time: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
         """(n,) int, the row of :attr:`knots` of ``receiver`` (n,) int (an index into :attr:`receivers`) at its own
         clock's ``time`` (n,) [s] in its clock ``part`` (n,) int (the detections' ``clock_part``; default 1): the

@@ -125,7 +125,8 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
         refined = read_positions(sync_dir)
         table, _ = with_positions(table, refined)
         missing = sorted(set(table["receiver"]) - set(clocks.receivers))
-        return clocks, table, {"source": "given", "folder": str(sync_dir), "receivers": len(clocks.receivers),
+        return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
+                               "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
     rounded = None

@@ -241,6 +241,9 @@ def test_a_sheet_s_interval_the_detections_contradict_is_said_and_taken_with_for
     common = dict(receivers=files["deployments"], tags=wrong, tag=name, sync=folder / "out" / "sync", workers=1)
     refused = sblsim.track(files["detections"], **common)
     check_tag_rows(refused.tags, refused.tracks, [str(files["detections"]), str(wrong)])
+    # the folder's reference receiver named in study.json (issue 98 item 14): the one sync.json names
+    made = json.loads((folder / "out" / "sync" / "sync.json").read_text())["reference_receiver"]
+    assert refused.summary["clocks"]["reference_receiver"] == made
     row = refused.tags.iloc[0]
     assert row["reason_code"] == "interval_contradicted"
     assert row["status"] == "refused" and "300:600 s stated, but the detections' steps" in row["reason"]
