@@ -202,6 +202,70 @@ def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     return -fix.covariance @ np.einsum("mn,mni->in", info, J) / sigma_toa
 
 
+#: The Gauss-Newton iterations of each refit of :func:`receiver_jackknife` (from the pooled position, its weights
+#: held).
+JACKKNIFE_ITERATIONS = 5
+
+
+def receiver_jackknife(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
+                       fix: StationaryFix) -> tuple[np.ndarray, np.ndarray]:
+    """The pooled position refitted without each receiver in turn, and the delete-a-group jackknife's covariance
+    of the position from them (dim, dim) [m²].
+
+    Pooling averages each arrival's own noise, not what is the same at every ping of one receiver (its survey, its
+    clock offset's error, a reflection on its path): the spread of the positions that leave one receiver out measures
+    what such errors do to the position, whatever their source (Efron & Stein, Ann. Stat. 9(3), 1981; receivers as
+    the groups of a delete-a-group jackknife: Kott, "The delete-a-group jackknife", J. Off. Stat. 17(4), 2001):
+    ``(g − 1) / g Σ (p_(i) − p̄)(p_(i) − p̄)ᵀ`` over the g receivers that heard the tag. Each refit holds the
+    pooled fit's robust weights and takes :data:`JACKKNIFE_ITERATIONS` Gauss-Newton steps from its position (a
+    receiver near the tag moves it by metres where its linear sensitivity says centimetres: the range's cone).
+
+    Parameters
+    ----------
+    toa, receivers, c, sigma_toa
+        As :func:`stationary_fix` took them.
+    fix : StationaryFix
+        Its result.
+
+    Returns
+    -------
+    positions : ndarray, (g, dim)
+        [m], one per receiver that heard the tag (in the receivers' order).
+    covariance : ndarray, (dim, dim)
+        [m²]; zeros with fewer than dim + 2 receivers (a refit without one has no arrival to spare).
+    """
+    toa = np.asarray(toa, float)
+    receivers = np.asarray(receivers, float)
+    heard = np.isfinite(toa)
+    n, dim = receivers.shape
+    sigma_toa = checked_sigma(sigma_toa, n)
+    y = np.where(heard, toa, 0.0)
+    used = np.flatnonzero(heard.any(axis=0))
+    out = []
+    for i in used:
+        w = fix.weights.copy()
+        w[:, i] = 0.0
+        kept = heard & (w > 0)
+        p = fix.position.copy()
+        for _ in range(JACKKNIFE_ITERATIONS):
+            unit, emitted = _geometry(y, receivers, c, p)
+            wp = _per_ping(w, sigma_toa)
+            r = np.where(kept, _centred(emitted, wp), 0.0) / sigma_toa
+            J = np.where(kept[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), wp), 0.0) \
+                / _columns(sigma_toa)
+            step = np.linalg.lstsq(np.einsum("mn,mni,mnj->ij", w, J, J), -np.einsum("mn,mni,mn->i", w, J, r),
+                                   rcond=None)[0]
+            p = p + step
+            if np.abs(step).max() < TOLERANCE:
+                break
+        out.append(p)
+    positions = np.array(out).reshape(len(used), dim)
+    if len(used) < dim + 2:
+        return positions, np.zeros((dim, dim))
+    d = positions - positions.mean(axis=0)
+    return positions, (len(used) - 1) / len(used) * d.T @ d
+
+
 def _columns(sigma_toa: float | np.ndarray) -> float | np.ndarray:
     """The timing noise as a divisor of the arrivals' Jacobians (m, n, dim): the one value, or (n, 1) per
     receiver."""
@@ -266,5 +330,5 @@ def moved(fixes: np.ndarray, times: np.ndarray, trusted: np.ndarray, seed: int =
     return len(k), observed, bool(observed < lowest)
 
 
-__all__ = ["ITERATIONS", "MAX_FIXES", "MIN_FIXES", "PERMUTATIONS", "TOLERANCE", "StationaryFix", "bias_sensitivity",
-           "moved", "stationary_fix"]
+__all__ = ["ITERATIONS", "JACKKNIFE_ITERATIONS", "MAX_FIXES", "MIN_FIXES", "PERMUTATIONS", "TOLERANCE", "StationaryFix",
+           "bias_sensitivity", "moved", "receiver_jackknife", "stationary_fix"]

@@ -91,10 +91,18 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             "the speed at its nearer end", True)
     m = s["motion"]
     if m.get("moved"):
-        t = m["moved_test"]
-        say(f"sblsim: warning: the tag moved: its {t['trusted_fixes']} trusted single-ping fixes lie in order in "
-            f"time (successive ones {t['successive_ratio']:.2f} of their spread apart, below every one of "
-            f"{t['permutations']} random orders); every row flagged (track it with --motion moving)", True)
+        v, change = m["still"], m["still"]["change"]
+        beyond = (f"beyond what its error terms let its fixes wander (step statistic {v['step_statistic']:.3g} over "
+                  f"{v['threshold']:.3g}; successive fixes {m['moved_test']['successive_ratio']:.2f} of their spread "
+                  "apart)")
+        if change is None:
+            say(f"sblsim: warning: the tag moved the whole time: its {v['trusted_fixes']} trusted single-ping fixes "
+                f"wander {beyond}; every row flagged (track it with --motion moving)", True)
+        else:
+            say(f"sblsim: warning: the tag moved after ping {change['last_still_ping']}: from ping "
+                f"{change['first_moved_ping']} on its fixes lie {change['distance_m']:.3g} m from its place, "
+                f"{beyond}; its {change['rows_moved']} rows from there flagged tag_moved and placed where it went, "
+                "the rows before it kept", True)
     quality = quality_line(s)
     say("  " + quality)
     for late in s["receivers_late"]:

@@ -1,12 +1,18 @@
 """A stationary tag (``motion`` ``stationary``): one position for all its pings, pooled from its arrivals
-(:mod:`sblsim.models.tracking.stationary`), and the consider covariance of the errors pooling does not average (the
-receivers' survey, the sound speed, the receivers' clock offsets).
+(:mod:`sblsim.models.tracking.stationary`), the consider covariance of the errors pooling does not average (the
+receivers' survey, the sound speed, the receivers' clock offsets, and what the receivers' jackknife shows), and the
+verdict of whether, and from when, it moved (:mod:`sblsim.models.tracking.still`).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking import still as sv
 from sblsim.models.tracking.timing import SIGMA_TOA
 
 
@@ -53,5 +59,157 @@ def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled
     return S @ B @ S.T
 
 
+def receivers_term(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
+                   sigma_toa: float | np.ndarray) -> np.ndarray:
+    """What the receivers' errors did to the pooled position (dim, dim) [m²]: the receivers' jackknife
+    (:func:`~sblsim.models.tracking.stationary.receiver_jackknife`), added whole to the pooled fit's covariance and
+    the consider terms. It sees what they cannot: a reflection on one receiver's path, a clock or a survey worse than
+    stated, the speed's change between pings weighing on each ping's receivers differently; added rather than merged
+    (a jackknife of 6 to 20 receivers falls short of its variance as often as not, and its share of the arrivals' own
+    noise is small beside the terms it adds to)."""
+    from sblsim.models.tracking.stationary import receiver_jackknife
 
-__all__ = ["stationary_consider", "stationary_track"]
+    return receiver_jackknife(toa, positions, c, sigma_toa, pooled)[1]
+
+
+@dataclass(frozen=True)
+class StillTag:
+    """A still tag's rows (:func:`still_tag`): the ``pings`` (rows of the TOA matrix) with an emission, their
+    ``emissions`` [s], each row's ``places`` (dim,) [m] and ``covariances`` (the pooled fit's own) and ``consider``
+    terms [m²], the arrivals each row kept (``heard``), the rows that ``moved`` (from the change on) and the
+    ``summary`` (``summary.json``'s ``motion``)."""
+
+    pings: np.ndarray
+    emissions: np.ndarray
+    places: np.ndarray
+    covariances: np.ndarray
+    consider: np.ndarray
+    heard: np.ndarray
+    moved: np.ndarray
+    summary: dict[str, Any]
+
+
+def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
+    """One place of a still tag from the pings ``rows``: its pooled fit, the consider terms and the receivers' term
+    summed (dim, dim) [m²], and the receivers' term's DRMS [m]."""
+    pooled = stationary_track(toa[rows], positions, c, fixes[rows], sigma_toa)
+    held = stationary_consider(toa[rows], positions, c, pooled, survey, speed_sigma, sigma_toa, clock_sigma)
+    spread = receivers_term(toa[rows], positions, c, pooled, sigma_toa)
+    return pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread)))
+
+
+def _rows(fit, rows: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """A pooled fit's emission times and arrivals kept (weight :data:`ROBUST_KEPT_WEIGHT` or more) on the record's
+    rows ``rows`` of m, NaN and 0 elsewhere."""
+    from sblsim.models.tracking.smoother import ROBUST_KEPT_WEIGHT
+
+    emissions, kept = np.full(m, np.nan), np.zeros(m, int)
+    emissions[rows] = fit.emissions
+    kept[rows] = (fit.weights >= ROBUST_KEPT_WEIGHT).sum(axis=1)
+    return emissions, kept
+
+
+def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, trusted: np.ndarray,
+              sigma_toa: float | np.ndarray, survey: np.ndarray | None, speed: dict,
+              clock_sigma: np.ndarray | None) -> StillTag:
+    """A still tag (``motion`` ``stationary``): its pooled place, and whether it moved beyond what its error terms
+    let its fixes wander (:func:`~sblsim.models.tracking.still.still_verdict`, with the single-ping fixes' order test
+    :func:`~sblsim.models.tracking.stationary.moved` as a second input: a change the fixes' order in time does not
+    show is none). The slow errors: each receiver's clock offset's ``clock_sigma`` [s], the sound speed's change over
+    the record (:data:`~sblsim.models.tracking.still.SPEED_WANDER`, or the calibration's stretches' spread where
+    larger), and a reflection at each receiver as large as its timing noise as the fixes show it. A tag that moved
+    keeps its first place on the rows before the change and its second place (where it went) on the rows after its
+    last still fix, those flagged; one that moved the whole time keeps one place, every row flagged (an animal).
+
+    Parameters
+    ----------
+    toa : ndarray, (m, n)
+        [s].
+    positions : ndarray, (n, dim)
+        [m].
+    c : float
+        [m/s].
+    fixes : tuple
+        The single-ping fixes ``(positions (m, dim), emissions (m,), covariances (m, dim, dim), used (m, n))``.
+    trusted : ndarray of bool, (m,)
+    sigma_toa : float or ndarray, (n,)
+        [s].
+    survey : ndarray, (n,), or None
+        The receivers' survey error [m].
+    speed : dict
+        The sound speed's summary (``sigma_m_s``, ``stretches_m_s`` where calibrated).
+    clock_sigma : ndarray, (n,), or None
+        [s].
+
+    Raises
+    ------
+    ModelError
+        Too few receivers heard the tag (one line).
+    """
+    from sblsim.models.tracking.stationary import PERMUTATIONS, moved
+
+    fx, fe, fc, fused = fixes
+    m, n = toa.shape
+    sigma = np.broadcast_to(np.asarray(sigma_toa, float), (n,))
+    clock = np.zeros(n) if clock_sigma is None else np.nan_to_num(np.asarray(clock_sigma, float))
+    stretches = np.asarray(speed.get("stretches_m_s") or [], float)
+    wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
+    speed_sigma = speed.get("sigma_m_s")
+    rows = np.arange(m)
+    pooled, extra, spread = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
+    rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
+    used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
+    slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
+                              np.diag(clock**2) + wander**2 * np.outer(rho, rho) / c**4)
+    multipath = sv.slow_covariance(positions, pooled.position, c, used, sigma, np.diag(sigma**2))
+    verdict = sv.still_verdict(fx, fc, fe, trusted, slow, multipath)
+    count, ratio, ordered = moved(fx, fe, trusted)
+    went = verdict.change is not None and ordered
+    emissions, kept = _rows(pooled, rows, m)
+    places = np.repeat(pooled.position[None], m, axis=0)
+    own, held = np.repeat(pooled.covariance[None], m, axis=0), np.repeat(extra[None], m, axis=0)
+    after, change = np.zeros(m, bool) | (went and verdict.throughout), None
+    if went and not verdict.throughout:  # the rows after the last still fix moved
+        last = int(verdict.order[verdict.change - 1])
+        after[last + 1:] = True
+        pooled, extra, spread = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma,
+                                       clock_sigma)
+        emissions[:], kept[:] = _rows(pooled, rows[:last + 1], m)
+        places[:last + 1], own[:last + 1], held[:last + 1] = pooled.position, pooled.covariance, extra
+        first = int(verdict.order[verdict.change])
+        change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
+        try:  # where it went: the pooled fit of the rows after
+            gone, gone_extra, _ = _place(toa, positions, c, fx, rows[last + 1:], sigma_toa, survey, speed_sigma,
+                                         clock_sigma)
+        except ModelError:  # too few receivers heard it there: its fixes' median
+            change |= {"second_place": np.nanmedian(fx[last + 1:], axis=0).tolist(), "second_place_sigma_m": None}
+        else:
+            moved_emissions, moved_kept = _rows(gone, rows[last + 1:], m)
+            emissions[last + 1:], kept[last + 1:] = moved_emissions[last + 1:], moved_kept[last + 1:]
+            places[last + 1:], own[last + 1:], held[last + 1:] = gone.position, gone.covariance, gone_extra
+            change |= {"second_place": gone.position.tolist(),
+                       "second_place_sigma_m": float(np.sqrt(np.trace((gone.covariance + gone_extra)[:2, :2])))}
+        change["distance_m"] = float(np.linalg.norm(np.asarray(change["second_place"])[:2] - pooled.position[:2]))
+    kp = np.flatnonzero(np.isfinite(emissions))
+    if change is not None:
+        change["rows_moved"] = int(after[kp].sum())
+    scale = verdict.white_scale if np.isfinite(verdict.white_scale) else 1.0
+    summary = {"verdict": "moving" if went and verdict.throughout else "moved" if went else "still",
+               "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
+               "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
+               "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
+               "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
+               "receivers_jackknife_m": spread, "change": change,
+               "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist()}
+    return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp],
+                    {"still": summary, "moved": bool(went),
+                     "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),
+                                    "permutations": PERMUTATIONS, "in_order": bool(ordered)}})
+
+
+def _number(x: float) -> float | None:
+    """A float for JSON: None where not finite."""
+    return float(x) if np.isfinite(x) else None
+
+
+__all__ = ["StillTag", "receivers_term", "stationary_consider", "stationary_track", "still_tag"]

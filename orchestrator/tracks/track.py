@@ -48,7 +48,7 @@ from sblsim.orchestrator.tracks.depth import (
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
-from sblsim.orchestrator.tracks.stationary import stationary_consider, stationary_track
+from sblsim.orchestrator.tracks.stationary import still_tag
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
 from sblsim.orchestrator.tracks.tracker import (
     DEPTH_SIGMA,
@@ -73,7 +73,7 @@ def _reason_counts(reason: pd.Series) -> dict[str, int]:
 
 
 #: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
-#: all pings, :func:`~sblsim.orchestrator.tracks.stationary.stationary_track`).
+#: all pings, :func:`~sblsim.orchestrator.tracks.stationary.still_tag`).
 MOTIONS = ("moving", "stationary")
 
 
@@ -128,8 +128,6 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     from sblsim.models.tracking.filter_consider import consider_terms, filter_sensitivity, smoothed_sensitivity
     from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
     from sblsim.models.tracking.smoother_covariance import consider_covariance
-    from sblsim.models.tracking.stationary import PERMUTATIONS
-    from sblsim.models.tracking.stationary import moved as tag_moved
     from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
     from sblsim.orchestrator.readers.receivers_file import read_receivers
     from sblsim.orchestrator.readers.time_series import read_track
@@ -280,25 +278,18 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
 
     robust = None
     track_rows: dict[str, np.ndarray] = {}  # the robust track's pings, places, covariances, arrivals and marks
-    if stationary:
-        pooled = stationary_track(toa, positions, c, fx, sigma)
-        kp = np.flatnonzero(np.isfinite(pooled.emissions))
-        pooled_extra = stationary_consider(toa, positions, c, pooled, survey, speed_sigma, sigma, clock_sigma)
-        rows("stationary", kp, pooled.emissions[kp], np.repeat(pooled.position[None], len(kp), axis=0),
-             np.repeat(pooled.covariance[None], len(kp), axis=0),
-             (pooled.weights[kp] >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), None,
-             None if pooled_extra is None else np.repeat(pooled_extra[None], len(kp), axis=0))
-        count, ratio, went = tag_moved(fx, fe, trusted)
-        motion_info |= {"moved_test": {"trusted_fixes": count, "successive_ratio": None if np.isnan(ratio) else ratio,
-                                       "permutations": PERMUTATIONS}, "moved": went,
-                        "consider_terms": [term for term, known in (
-                            ("survey", survey is not None), ("sound speed", bool(speed_sigma)),
-                            ("clocks", clock_sigma is not None and bool(np.nan_to_num(clock_sigma).any())))
-                            if known]}
-        if went:  # one position refuted by the tag's own fixes: no row of it is a position to take
-            frames["stationary"]["quality"] = "flagged"
-            frames["stationary"]["quality_reason"] = _with_reason(frames["stationary"]["quality_reason"], "tag_moved")
-            flagged["stationary"] = len(kp)
+    if stationary:  # one place (or two, where it moved beyond its error terms: the rows from the change flagged)
+        still = still_tag(toa, positions, c, (fx, fe, fc, fused), trusted, sigma, survey, speed, clock_sigma)
+        rows("stationary", still.pings, still.emissions, still.places, still.covariances, still.heard, None,
+             still.consider)
+        motion_info |= still.summary | {"consider_terms": [term for term, known in (
+            ("survey", survey is not None), ("sound speed", bool(speed_sigma)),
+            ("clocks", clock_sigma is not None and bool(np.nan_to_num(clock_sigma).any()))) if known]}
+        if still.moved.any():  # a place refuted by the tag's own fixes: no row after the change is a place to take
+            frame = frames["stationary"]
+            frame.loc[still.moved, "quality"] = "flagged"
+            frame.loc[still.moved, "quality_reason"] = _with_reason(frame["quality_reason"][still.moved], "tag_moved")
+            flagged["stationary"] = int((frame["quality"] == "flagged").sum())
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)
