@@ -129,6 +129,18 @@ class Deployments:
         ``sync_tag``, ``x``, ``y``, ``z``."""
         return self.table[["receiver", "sync_tag", "x", "y", "z"]].reset_index(drop=True)
 
+    def alternatives(self) -> dict[str, pd.DataFrame]:
+        """Other readings of positions given as latitude and longitude, for a synchronisation to name where the table
+        is refused (:func:`~sblsim.orchestrator.sync.run.synchronise`'s ``alternatives``): ``"latitude and longitude
+        swapped"``, the hydrophones (:meth:`hydrophones`) with each deployment's latitude taken as its longitude and
+        its longitude as its latitude, in the UTM zone of their centre; none where the positions were not given as
+        latitude and longitude or swapped they are no latitudes."""
+        lat, lon = self.table["lat"].to_numpy(float), self.table["lon"].to_numpy(float)
+        if self.frame is None or not np.isfinite(lat).all() or (np.abs(lon) > 90).any():
+            return {}
+        x, y = frame_for(lon, lat).from_latlon(lon, lat)
+        return {"latitude and longitude swapped": self.hydrophones().assign(x=x, y=y)}
+
     def summary(self) -> dict[str, Any]:
         """The frame and the deployments as every output's summary states them."""
         t = self.table

@@ -37,7 +37,7 @@ from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.noise import receiver_noise
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import check_resolution, residual_warning, time_quantum
-from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
+from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED, SPEED_TOLERANCE
 from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
@@ -119,7 +119,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                 survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
-                receivers_file: str | None = None) -> SyncOutcome:
+                receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None
+                ) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Before the clocks are fitted (once the sync tags' arrivals are grouped into emissions) the times' rounding is
@@ -162,6 +163,10 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         ``tables``) for a benchmark (the refined synchronisation's).
     receivers_file : str, optional
         The receivers file the table was read from, named where its positions are refused or said (None: "receivers").
+    alternatives : dict of str to pandas.DataFrame, optional
+        Other readings of the table's positions, by what they assume (``"latitude and longitude swapped"``): the same
+        receivers' ``x``, ``y`` [m] as read that way; where the table is refused for its distances and one of these
+        fits the travel times, the refusal names it as the cause.
 
     Returns
     -------
@@ -178,10 +183,10 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     started = clock.perf_counter()
     args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
     if not refine_positions:
-        return _synchronise(*args, timings=timings, receivers_file=receivers_file)
+        return _synchronise(*args, timings=timings, receivers_file=receivers_file, alternatives=alternatives)
     refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings,
-                           receivers_file=receivers_file)
-    table = _synchronise(*args, table_sigma=survey_sigma, receivers_file=receivers_file)
+                           receivers_file=receivers_file, alternatives=alternatives)
+    table = _synchronise(*args, table_sigma=survey_sigma, receivers_file=receivers_file, alternatives=alternatives)
     outcome = _kept(refined, table, float(survey_sigma))
     outcome.summary["wall_time_s"] = clock.perf_counter() - started
     return outcome
@@ -227,7 +232,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                  reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
-                 table_sigma: float | None = None, receivers_file: str | None = None) -> SyncOutcome:
+                 table_sigma: float | None = None, receivers_file: str | None = None,
+                 alternatives: dict[str, pd.DataFrame] | None = None) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
     as :func:`synchronise` (its parameters, ``table_sigma`` aside).
@@ -299,7 +305,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     distance = np.linalg.norm(positions[tag_home[tag]] - positions[receiver], axis=1)
     # said or refused before the work: the table's unit and the times' rounding
     notes_first = _checks(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver, tag,
-                          emission, duplicate, positions, sound_speed, series)
+                          emission, duplicate, positions, sound_speed, series, alternatives or {})
 
     if sound_speed is not None:
         slowness = np.full(len(time), 1.0 / sound_speed)
@@ -438,15 +444,16 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
 
 def _checks(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receivers_file: str | None, names: list[str],
             tag_names: list[str], receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, duplicate: np.ndarray,
-            positions: np.ndarray, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None
-            ) -> list[str]:
+            positions: np.ndarray, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
+            alternatives: dict[str, pd.DataFrame]) -> list[str]:
     """The checks before the clocks are fitted (:func:`synchronise`'s docstring) on the sync tags' arrivals
     (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo), at the sound speed given (a
     series' median), else the water's nominal: the table's distances weighed against the travel times (a table of
     degrees too small to weigh refused first), the times' rounding against the travel time across the array (the
     table's at the travel times' own scale: a table in another unit is never taken for a rounding), then the
-    table's verdict, naming ``receivers_file`` (None: the receivers). Returns the lines said (a table slightly
-    off)."""
+    table's verdict, naming ``receivers_file`` (None: the receivers), and where it refuses the table, the first of
+    ``alternatives`` (another reading of the positions) whose distances the travel times take named as the cause.
+    Returns the lines said (a table slightly off)."""
     times = sync["time"].to_numpy(float)
     given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
     speed = given or NOMINAL_SOUND_SPEED
@@ -460,7 +467,17 @@ def _checks(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receiver
     factor = found.scale if found is not None and found.scale > 0 else 1.0
     check_resolution(times, largest_travel_time(positions[np.unique(receiver)], speed) * factor, speed,
                      f"detections {source!r}")
-    said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
+    try:
+        said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
+    except ModelError as refused:
+        for cause, table in alternatives.items():
+            other = sync_scale(arrivals, hydrophones, table, given, time_quantum(times))
+            if other is not None and abs(other.scale - 1.0) <= SPEED_TOLERANCE:
+                raise ModelError(f"{where}: the sync tags' travel times fit the positions with {cause} (the "
+                                 f"distances by sound {other.scale:.3f} times the table's then), not as given "
+                                 f"({found.scale:.3f} times); allowed: each position as the table's columns name it "
+                                 "(latitude under lat, longitude under lon)") from None
+        raise refused
     return [said] if said else []
 
 

@@ -53,7 +53,7 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     array = in_water(detections, assign(detections, deployments), deployments)  # the deployments that logged it
     deployments, assigned = array.deployments, array.assigned
     outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
-                          **options)
+                          alternatives=deployments.alternatives(), **options)
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
     if array.line():

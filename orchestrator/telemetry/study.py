@@ -132,7 +132,8 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
     rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:
-            outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours)
+            outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours,
+                                  receivers_file=deployments.source, alternatives=deployments.alternatives())
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
         else:
