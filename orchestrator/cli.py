@@ -3,22 +3,22 @@
 ``map``, ``campaign``, ``ssp export``, ``analyze``, ``fmus build|validate|variables``, ``codegen receiver``).
 
 Bad input of any kind ends with a one-line ``sblsim: error: ...`` naming the field and the allowed range, exit
-status 2, and nothing written; Ctrl-C (SIGTERM, SIGHUP) with one line and 130 (128 + the signal). Standard
-output survives a reader that goes away (``sblsim run ... | head -1``).
+status 2, and nothing written; Ctrl-C, SIGTERM or SIGHUP with one line ``sblsim: interrupted`` and 128 + the signal
+(130, 143, 129), nothing half-written, wherever the signal lands (inside a compiled library's call too:
+:mod:`sblsim.orchestrator.io.stop`). Standard output survives a reader that goes away (``sblsim run ... | head -1``).
 """
 from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
-import threading
 from importlib.metadata import PackageNotFoundError, version
 
 from sblsim.models.errors import SblsimError
 from sblsim.orchestrator.commands import COMMANDS
-from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, SIGNAL, interrupted_status, print_notes
+from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, print_notes
 from sblsim.orchestrator.cosim.config import collected_notes
+from sblsim.orchestrator.io.stop import ending, exit_status, is_stop, stop_on
 
 
 class _Parser(argparse.ArgumentParser):
@@ -87,45 +87,18 @@ class _PipeSafeStream:
         return getattr(self._stream, name)
 
 
-def _terminate(signum: int, frame) -> None:
-    """SIGTERM or SIGHUP: stop as Ctrl-C does (finished work is kept, the same message), exit 128 + signal."""
-    SIGNAL.append(signum)
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sblsim`` console script."""
     args = _parser().parse_args(argv)
-    SIGNAL.clear()
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for name in ("SIGTERM", "SIGHUP"):
-            if hasattr(signal, name):
-                previous[name] = signal.signal(getattr(signal, name), _terminate)
     stdout = sys.stdout
     sys.stdout = _PipeSafeStream(stdout)
     try:
-        status = _command(args)
-        sys.stdout.flush()
-        return status
+        with stop_on():  # SIGINT, SIGTERM, SIGHUP: the command's stop (sblsim.orchestrator.io.stop)
+            status = _command(args)
+            sys.stdout.flush()
+            return status
     finally:
         sys.stdout = stdout
-        for name, handler in previous.items():
-            signal.signal(getattr(signal, name), handler)
-
-
-def _from_interrupt(exc: BaseException) -> bool:
-    """Whether ``exc`` was caused by a KeyboardInterrupt (Ctrl-C, or SIGTERM and SIGHUP as :func:`_terminate`
-    raises them): a signal handled while an extension's function ran (casadi's ``DM.__array__``) and that
-    function then returned a value makes Python raise ``SystemError(... returned a result with an exception
-    set)`` from it."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
 
 
 def _command(args: argparse.Namespace) -> int:
@@ -134,24 +107,32 @@ def _command(args: argparse.Namespace) -> int:
             status = COMMANDS[args.command].main(args)
             print_notes()
             return status
-    except SblsimError as exc:  # every kind of sblsim's errors (sblsim.models.errors): one line, exit 2
+    except BaseException as exc:
+        with ending():
+            return _ended_by(exc, args)
+    finally:
+        with ending():  # a second signal does not stop the release
+            while LOCKS:
+                LOCKS.pop().release()
+
+
+def _ended_by(exc: BaseException, args: argparse.Namespace) -> int:
+    """The exit status of a command that ``exc`` ended, its one line printed; ``exc`` raised again where it is
+    none of these (a fault of ours: its traceback)."""
+    if is_stop(exc):  # a signal: whatever came out of the work while it was pending (a compiled library's error)
+        print("sblsim: interrupted", file=sys.stderr)
+        return exit_status()
+    if isinstance(exc, SblsimError):  # every kind of sblsim's errors (sblsim.models.errors): one line, exit 2
         print(f"sblsim: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except OSError as exc:  # a full disk or a folder that refused a write during the work: one line, no traceback
+    if isinstance(exc, OSError):  # a full disk or a folder that refused a write during the work: one line
         reason = os.strerror(exc.errno) if exc.errno else str(exc)
         where = f": {exc.filename}" if exc.filename else ""
         resume = (" (a campaign keeps its finished chunks: run it again with --resume)" if args.command == "campaign"
                   else "")
         print(f"sblsim: error: {reason}{where}; nothing in the output folder was replaced{resume}", file=sys.stderr)
         return EXIT_USAGE
-    except (KeyboardInterrupt, SystemError) as exc:  # a SystemError: Ctrl-C inside an extension's call
-        if not _from_interrupt(exc):
-            raise
-        print("sblsim: interrupted", file=sys.stderr)
-        return interrupted_status()
-    finally:
-        while LOCKS:
-            LOCKS.pop().release()
+    raise exc
 
 
 if __name__ == "__main__":

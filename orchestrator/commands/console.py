@@ -16,10 +16,11 @@ from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import take_notes
 from sblsim.orchestrator.io.arguments import MAX_SEED
 from sblsim.orchestrator.io.output import OutputLock, check_output, folder_name
+from sblsim.orchestrator.io.stop import exit_status
 
-#: The exit status of bad input (one line ``sblsim: error: ...``, nothing written) and of Ctrl-C.
+#: The exit status of bad input (one line ``sblsim: error: ...``, nothing written); a stopped command's is
+#: :func:`interrupted_status`.
 EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
 
 
 #: --fmu-dir: where the fmu engine looks when it is not given (fmus/build of a checkout, else the user cache).
@@ -45,13 +46,10 @@ def check_seed_option(seed: int | None) -> None:
         raise ModelError(f"--seed: {shown(seed)} is outside the allowed range [0, {MAX_SEED}]")
 
 
-#: The signal (SIGTERM, SIGHUP) that stopped the command, if one did: its exit status is 128 + the signal.
-SIGNAL: list[int] = []
-
-
 def interrupted_status() -> int:
-    """The exit status of a command stopped by Ctrl-C (130) or by a signal (128 + its number)."""
-    return 128 + SIGNAL[-1] if SIGNAL else EXIT_INTERRUPTED
+    """The exit status of a stopped command: 128 + the signal that stopped it (Ctrl-C 130, SIGTERM 143, SIGHUP 129;
+    :func:`sblsim.orchestrator.io.stop.exit_status`)."""
+    return exit_status()
 
 
 #: The output folders this command holds locked (released when it ends).

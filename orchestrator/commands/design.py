@@ -14,6 +14,7 @@ from sblsim.models.declarations import shown
 from sblsim.orchestrator.commands.common import Progress
 from sblsim.orchestrator.commands.console import check_seed_option, output_folder, output_name
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.design.problem import read_problem
 from sblsim.orchestrator.io.arguments import check_count, check_seed, path_argument, prepare_out
 from sblsim.orchestrator.io.progress import check_progress
 
@@ -168,8 +169,6 @@ def design(problem: str | Path | Mapping | None = None, *, scenario: str | Path 
 
 def _problem(problem: Any) -> dict:
     """The raw sections of a problem argument (a copy)."""
-    from sblsim.orchestrator.design.problem import read_problem
-
     if problem is None:
         return {}
     if isinstance(problem, Mapping):

@@ -8,6 +8,9 @@ seconds, none for work that ends sooner), the Python API ``False`` by default (s
 or a callable. A campaign's reporter takes three options: it starts where a resumed campaign stands
 (``initial``), prints its first and last line whatever the time (``ends``), and its line has the rate
 (``rate``: ``campaign: 4/8 runs (50 %), 0.5 runs/s, about 8 s left``).
+
+Each update is also where the work stops when a stop is pending (:func:`sblsim.orchestrator.io.stop.check`: a
+signal whose exception a compiled library dropped, or that came between two steps).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from typing import Callable, Union
 from tqdm import tqdm
 
 from sblsim.models.declarations import ModelError, shown
+from sblsim.orchestrator.io.stop import check
 
 #: How often a plain progress line is printed when standard error is not a terminal [s].
 LOG_EVERY = 10.0
@@ -113,7 +117,14 @@ class Progress:
         return self.bar is not None or self.callback is not None or self.log
 
     def update(self, units: float = 1) -> None:
-        """``units`` more of the work are done."""
+        """``units`` more of the work are done.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            A stop is pending (:func:`sblsim.orchestrator.io.stop.check`): the work stops at this step.
+        """
+        check()
         self.done += units
         if self.bar is not None:
             self.bar.update(units)

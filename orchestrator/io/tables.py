@@ -1,13 +1,14 @@
-"""Hostile-safe reading of the tables sblsim is given: recorded logs (``sblsim replay``, ``sblsim calibrate``).
+"""Hostile-safe reading of the text files sblsim is given: their bytes, lines, cells and numbers.
 
-A table is a CSV file (a header row, ``#`` comment lines and blank lines skipped) or a Parquet file, read
-into text cells so that every reader checks every cell itself (:func:`number`) and names the line and the
-column of a bad one. A file is checked to be a regular file before it is opened (a FIFO would block), and one
-larger than :data:`MAX_LOG_BYTES` or with more than :data:`MAX_LOG_ROWS` rows is refused before it is read
-whole, and one whose line is longer than :data:`MAX_LINE_BYTES`, holds more than :data:`MAX_LINE_CELLS` cells, or
-whose lines hold more than :data:`MAX_CELLS` in all is refused before anything parses it (:func:`check_cells`, which
-every table reader of sblsim goes through: a file's bytes alone do not bound the memory its cells take, a line of
-commas being a cell a byte). A table never names a path that is then read or written.
+A file is checked to be a regular file before it is opened (a FIFO would block). A file read whole
+(:func:`read_lines`, :func:`read_bounded`) larger than its stated bytes (default :data:`MAX_LOG_BYTES`) or lines
+(default :data:`MAX_LOG_ROWS`) is refused before it is read whole, and one whose line is longer than
+:data:`MAX_LINE_BYTES`, holds more than :data:`MAX_LINE_CELLS` cells, or whose lines hold more than
+:data:`MAX_CELLS` in all is refused before anything parses it (:func:`check_cells`, which every table reader of
+sblsim goes through: a file's bytes alone do not bound the memory its cells take, a line of commas being a cell a
+byte). A log of any length is read in pieces instead, with the per-line bounds alone
+(:mod:`sblsim.orchestrator.io.log_tables`). Every reader checks every cell itself (:func:`number`,
+:data:`NUMBER`) and names the line and the column of a bad one.
 """
 
 from __future__ import annotations
@@ -17,22 +18,14 @@ import math
 import os
 import re
 import stat
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
-import pandas as pd
 
 from sblsim.models.declarations import ModelError
 
-#: Comment lines of an exported CSV log that hold the run's resolved configuration (TOML), one line each.
-CONFIG_PREFIX = "#% "
-#: Parquet schema metadata keys of an exported log: its title and the run's configuration.
-META_TITLE, META_CONFIG = b"sblsim.title", b"sblsim.config"
-#: Suffixes of the formats read and written.
-SUFFIXES = (".csv", ".parquet")
-#: The largest log read [bytes] and the most rows (a log is read whole, checked before reading it).
+#: The largest file read whole [bytes] and the most rows, by default (checked before reading it whole).
 MAX_LOG_BYTES = 256 * 2**20
 MAX_LOG_ROWS = 2_000_000
 #: The most cells a line of a table holds [1] (the widest a reader takes, a GLATOS or OTN extract, has about 40
@@ -50,26 +43,6 @@ NUMBER = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|i
 
 
 # --------------------------------------------------------------------------- reading tables
-
-def cell(value: Any) -> str:
-    """A Parquet cell as the text a CSV cell would hold ('' for a missing value)."""
-    if value is None or value is pd.NA or (isinstance(value, float) and math.isnan(value)):
-        return ""
-    if isinstance(value, (float, np.floating)):
-        return repr(float(value))
-    return str(value)
-
-
-@dataclass
-class TextTable:
-    """A CSV or Parquet file as text cells: its header, its rows (where, cells) and its metadata."""
-
-    path: Path
-    header: list[str]
-    rows: list[tuple[str, list[str]]]
-    config: str = ""
-    title: str = ""
-
 
 def regular_file(path: Path, what: str) -> int:
     """The size of a file that is a regular file [bytes] (checked without opening it: a FIFO would block).
@@ -114,8 +87,35 @@ def _first_row(data: bytes, longest: int) -> bytes:
     return found.group(0) if found else b""
 
 
+def check_line(name: str, what: str, number: int, cells: int, length: int, *, max_line_cells: int | None = None,
+               max_line_bytes: int | None = None, comma: bool = True) -> None:
+    """Refuse line ``number`` of a table's text that holds more than ``max_line_cells`` cells or is longer than
+    ``max_line_bytes`` (default :data:`MAX_LINE_CELLS`, :data:`MAX_LINE_BYTES`): the message of
+    :func:`check_cells`, its cells counted as ``comma`` says (its commas and one, else its runs of non-spaces).
+
+    Raises
+    ------
+    ModelError
+        ``what: 'name' line N holds C cells; allowed at most L cells a line (...)`` or ``... line N is B bytes long;
+        allowed at most L bytes a line``.
+    """
+    max_line_cells = MAX_LINE_CELLS if max_line_cells is None else max_line_cells
+    max_line_bytes = MAX_LINE_BYTES if max_line_bytes is None else max_line_bytes
+    if cells > max_line_cells:
+        raise ModelError(f"{what}: {name!r} line {number} holds {cells:,} cells; allowed at most "
+                         f"{max_line_cells:,} cells a line ({_counted(comma)})")
+    if length > max_line_bytes:
+        raise ModelError(f"{what}: {name!r} line {number} is {length:,} bytes long; allowed at most "
+                         f"{max_line_bytes:,} bytes a line")
+
+
+def _counted(comma: bool) -> str:
+    return ("commas" if comma else "runs of characters between spaces") + " counted before parsing"
+
+
 def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_line_cells: int | None = None,
-                max_cells: int | None = None, max_line_bytes: int | None = None, comments: bool = False) -> int:
+                max_cells: int | None = None, max_line_bytes: int | None = None, comments: bool = False,
+                first_line: int = 1) -> int:
     """Refuse a table's text before anything parses it into cells: a line longer than ``max_line_bytes``, a line of
     more than ``max_line_cells`` cells, or more than ``max_cells`` cells in all. The cells are counted in the bytes,
     :data:`_PIECE` bytes at a time (at most about 70 MiB besides the text, whatever its shape).
@@ -141,6 +141,8 @@ def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_
     comments : bool
         A line whose first character is ``#`` is a comment the reader drops unparsed: its cells are not counted,
         its length is.
+    first_line : int
+        The number of the text's first line in its file (a piece of a file read in pieces), as the errors name it.
 
     Returns
     -------
@@ -162,19 +164,14 @@ def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_
     if delimiter not in (",", " "):
         raise ValueError(f"check_cells: delimiter {delimiter!r}; allowed ',', ' ' or 'auto'")
     comma = delimiter == ","
-    split = ("commas" if comma else "runs of characters between spaces") + " counted before parsing"
 
     def check(number: int, cells: int, length: int) -> None:  # one line's cells and bytes
-        if cells > max_line_cells:
-            raise ModelError(f"{what}: {name!r} line {number} holds {cells:,} cells; allowed at most "
-                             f"{max_line_cells:,} cells a line ({split})")
-        if length > max_line_bytes:
-            raise ModelError(f"{what}: {name!r} line {number} is {length:,} bytes long; allowed at most "
-                             f"{max_line_bytes:,} bytes a line")
+        check_line(name, what, number, cells, length, max_line_cells=max_line_cells, max_line_bytes=max_line_bytes,
+                   comma=comma)
 
     raw = np.frombuffer(data, np.uint8)
     size = raw.size
-    line, start, carried, total = 1, 0, 0, 0  # the current line's number, first byte and cells in earlier pieces
+    line, start, carried, total = first_line, 0, 0, 0  # the current line's number, first byte, cells in earlier pieces
     spaced = True  # the byte before the piece is a space or a line end (or there is none)
     for at in range(0, size, _PIECE):
         piece = raw[at:at + _PIECE]
@@ -221,38 +218,8 @@ def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_
         total += cells
     if total > max_cells:
         raise ModelError(f"{what}: {name!r} holds {total:,} cells; allowed at most {max_cells:,} cells in a table "
-                         f"({split})")
+                         f"({_counted(comma)})")
     return total
-
-
-def read_parquet(path: Path, what: str) -> TextTable:
-    """A Parquet file's columns as text cells (:func:`read_table`); its pandas metadata is not used. One of more
-    than :data:`MAX_LOG_ROWS` rows, :data:`MAX_LINE_CELLS` columns or :data:`MAX_CELLS` cells is refused from its
-    metadata, before a cell is read."""
-    name = str(path)
-    try:
-        import pyarrow.parquet as pq
-
-        meta = pq.ParquetFile(path).metadata
-        rows, width = meta.num_rows, meta.num_columns
-        if rows > MAX_LOG_ROWS:
-            raise too_large(name, what, f"has {rows:,} rows")
-        if width > MAX_LINE_CELLS or rows * width > MAX_CELLS:  # refused before a cell is read: its metadata's
-            raise ModelError(f"{what}: {name!r} holds {rows:,} rows of {width:,} columns; allowed at most "
-                             f"{MAX_LINE_CELLS:,} columns and {MAX_CELLS:,} cells in a table")
-        table = pq.read_table(path)
-        meta = table.schema.metadata or {}
-        header = [str(c).strip() for c in table.column_names]
-        columns = [[cell(v) for v in table.column(k).to_pylist()] for k in range(table.num_columns)]
-    except ModelError:
-        raise
-    except Exception as exc:  # pyarrow raises its own errors on a damaged file
-        raise ModelError(f"{what}: {name!r} is not a readable Parquet file ({' '.join(str(exc).split())[:200]})") \
-            from None
-    cells = [list(values) for values in zip(*columns)] if columns else []
-    return TextTable(path, header, [(f"row {k + 1}", c) for k, c in enumerate(cells)],
-                  meta.get(META_CONFIG, b"").decode("utf-8", "replace"),
-                  meta.get(META_TITLE, b"").decode("utf-8", "replace"))
 
 
 def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
@@ -377,67 +344,6 @@ def csv_cells(lines: Sequence[tuple[int, str]], where: str, delimiter: str = ","
     return out
 
 
-def read_table(path: Path, what: str) -> TextTable:
-    """Read a CSV (``#`` comment lines, blank lines skipped) or Parquet file into text cells.
-
-    Lines end at ``\\n`` (or ``\\r\\n``) only. A file larger than :data:`MAX_LOG_BYTES` or with more than
-    :data:`MAX_LOG_ROWS` rows is refused before it is read whole.
-
-    Raises
-    ------
-    ModelError
-        ``what: ...`` for a missing or unreadable file, one that is not a regular file, a suffix other than
-        .csv or .parquet, a file too large, no header, or a line whose field count differs from the header's
-        (with its line number).
-    """
-    name = str(path)
-    if path.suffix.lower() not in SUFFIXES:
-        raise ModelError(f"{what}: {name!r} must be a .csv or .parquet file")
-    if path.suffix.lower() == ".parquet":
-        size = regular_file(path, what)
-        if size > MAX_LOG_BYTES:
-            raise too_large(name, what, f"is {size / 2**20:.0f} MiB")
-        return read_parquet(path, what)
-    lines = read_lines(path, what, comments=True)
-    data: list[tuple[int, str]] = []
-    config: list[str] = []
-    title = ""
-    for number, line in enumerate(lines, start=1):
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped.startswith("#"):
-            if not data and line.startswith(CONFIG_PREFIX.rstrip()):
-                config.append(line[len(CONFIG_PREFIX):] if line.startswith(CONFIG_PREFIX) else "")
-            elif not data and not title:
-                title = stripped.lstrip("#").strip()
-            continue
-        data.append((number, line))
-        if len(data) > MAX_LOG_ROWS + 1:  # the header and the rows
-            raise too_large(name, what, f"has more than {MAX_LOG_ROWS:,} rows (line {number})")
-    if not data:
-        raise ModelError(f"{what}: {name!r} holds no header line (and no rows)")
-    parsed = csv_cells(data, f"{what}: {name!r}")
-    header = [c.strip() for c in parsed[0][1]]
-    rows: list[tuple[str, list[str]]] = []
-    for number, cells in parsed[1:]:
-        if len(cells) != len(header):
-            raise ModelError(f"{what}: {name!r} line {number} has {len(cells)} fields, the header "
-                             f"{len(header)} ({','.join(header)})")
-        rows.append((f"line {number}", [c.strip() for c in cells]))
-    return TextTable(path, header, rows, "\n".join(config), title)
-
-
-def columns(table: TextTable, what: str) -> dict[str, int]:
-    """Column name -> position; a name given twice is refused."""
-    index: dict[str, int] = {}
-    for k, name in enumerate(table.header):
-        if name in index:
-            raise ModelError(f"{what}: {str(table.path)!r}: the column {name!r} is given twice")
-        index[name] = k
-    return index
-
-
 def number(text: str, where: str, column: str, low: float, high: float) -> float:
     """A cell as a finite number within [low, high].
 
@@ -458,7 +364,5 @@ def number(text: str, where: str, column: str, low: float, high: float) -> float
     return value
 
 
-__all__ = ["CONFIG_PREFIX", "MAX_CELLS", "MAX_LINE_BYTES", "MAX_LINE_CELLS", "MAX_LOG_BYTES", "MAX_LOG_ROWS",
-           "META_CONFIG", "META_TITLE", "NUMBER", "SUFFIXES", "TextTable", "cell", "check_cells", "columns",
-           "csv_cells", "number", "read_bounded", "read_lines", "read_parquet", "read_table", "regular_file",
-           "text_lines", "too_large"]
+__all__ = ["MAX_CELLS", "MAX_LINE_BYTES", "MAX_LINE_CELLS", "MAX_LOG_BYTES", "MAX_LOG_ROWS", "NUMBER", "check_cells",
+           "check_line", "csv_cells", "number", "read_bounded", "read_lines", "regular_file", "text_lines", "too_large"]

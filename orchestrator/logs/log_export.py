@@ -24,13 +24,13 @@ from sblsim.orchestrator.cosim.metrics import new_on_lane
 from sblsim.orchestrator.cosim.plan import as_plan
 from sblsim.orchestrator.cosim.run import RunRecord
 from sblsim.orchestrator.cosim.run_output import _label
-from sblsim.orchestrator.io.output import write_together
-from sblsim.orchestrator.io.tables import (
+from sblsim.orchestrator.io.log_tables import (
     CONFIG_PREFIX,
     META_CONFIG,
     META_TITLE,
     SUFFIXES,
 )
+from sblsim.orchestrator.io.output import write_together
 from sblsim.orchestrator.logs.receiver_log import LOG_TITLE, TRUTH_TITLE
 
 

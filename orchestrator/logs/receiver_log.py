@@ -14,6 +14,7 @@ that a replay of the export (:mod:`sblsim.orchestrator.logs.replay`) equals the 
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,18 +25,20 @@ import numpy as np
 from sblsim.models.acoustics.channel.component import Acoustics
 from sblsim.models.declarations import SIGNAL_RANGES, ModelError
 from sblsim.models.systems import System
-from sblsim.orchestrator.io.tables import (  # the hostile-safe table reading every log reader shares
-    NUMBER,
-)
-from sblsim.orchestrator.io.tables import columns as _columns
+from sblsim.orchestrator.cosim.limits import MEMORY_SHARE, available_memory
+from sblsim.orchestrator.io.log_tables import check_fits, table_chunks, table_length
+from sblsim.orchestrator.io.log_tables import columns as _columns
+from sblsim.orchestrator.io.tables import NUMBER  # the hostile-safe cell checks every log reader shares
 from sblsim.orchestrator.io.tables import number as _number
-from sblsim.orchestrator.io.tables import read_table as _read_table
 from sblsim.orchestrator.logs.range_floor import range_floor
 
 #: The log format's version (the first comment line of an exported CSV log, ``# sblsim log, format 1``).
 FORMAT = 1
 LOG_TITLE = f"sblsim log, format {FORMAT}"
 TRUTH_TITLE = f"sblsim truth track, format {FORMAT}"
+#: The memory a row of a log takes while it is read [bytes] (its numbers and place kept, their pieces joined, sorted
+#: and without duplicates).
+LOG_ROW_BYTES = 400
 #: Rows that come up to this much earlier than a row before them are sorted into place (counted); a row
 #: further back is a clock jump and the log is refused [s].
 REORDER_WINDOW = 1.0
@@ -144,7 +147,7 @@ def log_config(path: Path | str) -> str:
     ModelError
         As :func:`read_log` for a file that cannot be read.
     """
-    return _read_table(Path(path), "log").config
+    return next(table_chunks(Path(path), "log")).config  # its first piece: the configuration comes first
 
 
 def read_log(path: Path | str, n_beacons: int, system: System | None = None, sound_speed: float = 1500.0,
@@ -195,9 +198,11 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
         As listed above.
     """
     path = Path(path)
-    table = _read_table(path, "log")
-    index = _columns(table, "log")
     name = str(path)
+    check_fits(path, "log", table_length(path, "log"), LOG_ROW_BYTES, MEMORY_SHARE * available_memory())
+    pieces = table_chunks(path, "log")  # in pieces: a log of any length in the memory its numbers take
+    first = next(pieces)
+    index = _columns(first, "log")
     doc = "see docs/log-format.md"
     extra = tuple(system.log_columns) if system is not None else ()  # the system's own columns (USBL)
     required = ["time_s", "beacon_id", *_PACKET_COLUMNS, "depth_m", *extra]
@@ -205,7 +210,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     if missing:
         kind = f" (a {system.name.upper()} log)" if extra and set(missing) <= set(extra) else ""
         raise ModelError(f"log: {name!r} has no column {missing[0]}{kind}; its columns: "
-                         f"{','.join(table.header)}; {doc}")
+                         f"{','.join(first.header)}; {doc}")
     has_range, has_travel = "range_m" in index, "travel_time_s" in index
     if has_range == has_travel:
         which = "both" if has_range else "neither of"
@@ -219,7 +224,7 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     # an inverted LBL's log: time_s is a ping's nominal epoch, not its emission, and a range its pseudo-range
     # against that epoch (negative where the ping left early)
     nominal = system is not None and "toa" in system.ranging
-    ignored = [c for c in table.header if c not in used]
+    ignored = [c for c in first.header if c not in used]
     speeds = next(v for v in Acoustics.variables() if v.name == "sound_speed_assumed")
     t_lo, t_hi = -1e12, 1e12  # any clock; the receiver runs on times from the log's start
     # a range is a measurement, not a distance: c times a measured time (two-way: the round trip less the nominal
@@ -232,80 +237,113 @@ def read_log(path: Path | str, n_beacons: int, system: System | None = None, sou
     p_lo, p_hi = SIGNAL_RANGES["position"]
     d_lo, d_hi = SIGNAL_RANGES["depth"]
 
-    counts = {"rows": len(table.rows), "unknown_beacon": 0, "duplicate": 0, "out_of_order": 0}
-    kept: list[tuple[float, int, float, tuple, float, tuple, str, float]] = []
+    counts = {"rows": 0, "unknown_beacon": 0, "duplicate": 0, "out_of_order": 0}
+    parts: list[_Rows] = []
     latest, latest_where = -math.inf, ""
-    for where_short, cells in table.rows:
-        where = f"log: {name!r} {where_short}"
-        sent = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
-        start = sent if math.isnan(start) else start
-        t = sent  # the row's arrival: when the receiver uses it
-        if has_arrival and cells[index["rx_time"]]:
-            t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
-            if t < sent and not nominal:
-                raise ModelError(f"{where}: rx_time {t:.10g} s is before the row's time_s {sent:.10g} s: a packet "
-                                 "arrives after it is sent; leave rx_time empty where the arrival is not known")
-        beacon = _beacon(cells[index["beacon_id"]], n_beacons)
-        if beacon < 0:
-            counts["unknown_beacon"] += 1
-            continue
-        if t < latest - REORDER_WINDOW:
-            column = "rx_time" if t != sent else "time_s"
-            raise ModelError(f"{where}: {column} {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
-                             f"{latest:.10g} s: a clock jump back (rows up to {REORDER_WINDOW:g} s out of order "
-                             f"are sorted); replay the rows before and from {where_short} as two logs, or "
-                             "correct the clock")
-        if t < latest:
-            counts["out_of_order"] += 1
-        elif t > latest:
-            latest, latest_where = t, where_short
-        depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
-        if beacon == 0:
-            kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0,) * len(extra), where_short, sent))
-            continue
-        if has_range:
-            rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
-        else:
-            travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", -1e3, 1e3)
-            speed = sound_speed
-            if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
-                speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min, speeds.max)
-            rng = speed * travel
-        lowest = floor - fall * (abs(sent - start) + REORDER_WINDOW)
-        if rng < lowest:
-            column, value, low, high = (("range_m", rng, lowest, r_hi) if has_range else
-                                        ("travel_time_s", travel, lowest / speed, 1e3))
-            raise ModelError(f"{where}: {column}: {value:.10g} is outside the allowed range [{low:.6g}, {high:g}]: "
-                             f"the lowest range this configuration's channel measures ({reason}); see "
-                             "docs/log-format.md")
-        position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
-        own = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra)
-        kept.append((t, beacon, rng, position, depth, own, where_short, sent))
+    for table in itertools.chain([first], pieces):
+        counts["rows"] += len(table.rows)
+        kept: list[tuple[float, int, float, tuple, float, tuple, str, float]] = []
+        for where_short, cells in table.rows:
+            where = f"log: {name!r} {where_short}"
+            sent = _number(cells[index["time_s"]], where, "time_s", t_lo, t_hi)
+            start = sent if math.isnan(start) else start
+            t = sent  # the row's arrival: when the receiver uses it
+            if has_arrival and cells[index["rx_time"]]:
+                t = _number(cells[index["rx_time"]], where, "rx_time", t_lo, t_hi)
+                if t < sent and not nominal:
+                    raise ModelError(f"{where}: rx_time {t:.10g} s is before the row's time_s {sent:.10g} s: a packet "
+                                     "arrives after it is sent; leave rx_time empty where the arrival is not known")
+            beacon = _beacon(cells[index["beacon_id"]], n_beacons)
+            if beacon < 0:
+                counts["unknown_beacon"] += 1
+                continue
+            if t < latest - REORDER_WINDOW:
+                column = "rx_time" if t != sent else "time_s"
+                raise ModelError(f"{where}: {column} {t:.10g} s is {latest - t:.6g} s before {latest_where}'s "
+                                 f"{latest:.10g} s: a clock jump back (rows up to {REORDER_WINDOW:g} s out of order "
+                                 f"are sorted); replay the rows before and from {where_short} as two logs, or "
+                                 "correct the clock")
+            if t < latest:
+                counts["out_of_order"] += 1
+            elif t > latest:
+                latest, latest_where = t, where_short
+            depth = _number(cells[index["depth_m"]], where, "depth_m", d_lo, d_hi)
+            if beacon == 0:
+                kept.append((t, 0, 0.0, (0.0, 0.0, 0.0), depth, (0.0,) * len(extra), where_short, sent))
+                continue
+            if has_range:
+                rng = _number(cells[index["range_m"]], where, "range_m", r_lo, r_hi)
+            else:
+                travel = _number(cells[index["travel_time_s"]], where, "travel_time_s", -1e3, 1e3)
+                speed = sound_speed
+                if "sound_speed_mps" in index and cells[index["sound_speed_mps"]]:
+                    speed = _number(cells[index["sound_speed_mps"]], where, "sound_speed_mps", speeds.min,
+                                    speeds.max)
+                rng = speed * travel
+            lowest = floor - fall * (abs(sent - start) + REORDER_WINDOW)
+            if rng < lowest:
+                column, value, low, high = (("range_m", rng, lowest, r_hi) if has_range else
+                                            ("travel_time_s", travel, lowest / speed, 1e3))
+                raise ModelError(f"{where}: {column}: {value:.10g} is outside the allowed range [{low:.6g}, "
+                                 f"{high:g}]: the lowest range this configuration's channel measures ({reason}); see "
+                                 "docs/log-format.md")
+            position = tuple(_number(cells[index[c]], where, c, p_lo, p_hi) for c in _PACKET_COLUMNS)
+            own = tuple(_number(cells[index[c]], where, c, -10.0, 10.0) for c in extra)
+            kept.append((t, beacon, rng, position, depth, own, where_short, sent))
+        parts.append(_Rows.of(kept, len(extra)))
 
     # in arrival order (stable: rows of one time keep the file's order), then without duplicates
-    kept.sort(key=lambda row: row[0])
-    seen: set[tuple[float, int]] = set()
-    rows = []
-    for row in kept:
-        key = (row[7], row[1])
-        if key in seen:
-            counts["duplicate"] += 1
-            continue
-        seen.add(key)
-        rows.append(row)
-    if not rows:
+    rows = _Rows.joined(parts, len(extra))
+    del parts
+    rows = rows.take(np.argsort(rows.time, kind="stable"))
+    keys = np.rec.fromarrays([rows.sent, rows.beacon], names="sent,beacon")
+    once = np.sort(np.unique(keys, return_index=True)[1])  # each (time_s, beacon) where it first comes
+    counts["duplicate"] = rows.time.size - once.size
+    rows = rows.take(once)
+    if not rows.time.size:
         raise ModelError(f"log: {name!r} has no row to replay ({counts['rows']} rows; {counts['unknown_beacon']} "
                          f"with a beacon id outside 1 … {n_beacons}); {doc}")
-    times = np.array([r[0] for r in rows])
-    gaps = np.diff(times)
-    gap = (float(gaps.max()), rows[int(gaps.argmax()) + 1][6]) if gaps.size else (0.0, rows[0][6])
-    return Log(path=path, time=times, beacon=np.array([r[1] for r in rows], dtype=np.int64),
-               range=np.array([r[2] for r in rows]), beacon_ned=np.array([r[3] for r in rows], dtype=float),
-               depth=np.array([r[4] for r in rows]),
-               system_values=np.array([r[5] for r in rows], dtype=float) if extra else None,
-               where=[r[6] for r in rows], counts=counts, longest_gap=gap,
-               typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored, config=table.config,
-               sent=np.array([r[7] for r in rows]), system_columns=dict(system.log_columns) if extra else {})
+    gaps = np.diff(rows.time)
+    gap = (float(gaps.max()), rows.where[int(gaps.argmax()) + 1]) if gaps.size else (0.0, rows.where[0])
+    return Log(path=path, time=rows.time, beacon=rows.beacon, range=rows.range, beacon_ned=rows.beacon_ned,
+               depth=rows.depth, system_values=rows.system_values if extra else None, where=rows.where, counts=counts,
+               longest_gap=gap, typical_gap=float(np.median(gaps)) if gaps.size else 0.0, ignored=ignored,
+               config=first.config, sent=rows.sent, system_columns=dict(system.log_columns) if extra else {})
+
+
+@dataclass
+class _Rows:
+    """Rows of a log kept as arrays (a piece's, or the whole log's): as :class:`Log`'s fields."""
+
+    time: np.ndarray
+    beacon: np.ndarray
+    range: np.ndarray
+    beacon_ned: np.ndarray
+    depth: np.ndarray
+    system_values: np.ndarray
+    where: list[str]
+    sent: np.ndarray
+
+    @classmethod
+    def of(cls, kept: list[tuple], k: int) -> _Rows:
+        """The rows ``(t, beacon, range, position, depth, own, where, sent)`` of a piece (``k`` system values)."""
+        return cls(np.array([r[0] for r in kept], float), np.array([r[1] for r in kept], np.int64),
+                   np.array([r[2] for r in kept], float), np.array([r[3] for r in kept], float).reshape(len(kept), 3),
+                   np.array([r[4] for r in kept], float), np.array([r[5] for r in kept], float).reshape(len(kept), k),
+                   [r[6] for r in kept], np.array([r[7] for r in kept], float))
+
+    @classmethod
+    def joined(cls, parts: list[_Rows], k: int) -> _Rows:
+        """The pieces' rows, one after the other."""
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("time", "beacon", "range",
+                                                                               "beacon_ned", "depth",
+                                                                               "system_values")),
+                   [w for p in parts for w in p.where], np.concatenate([p.sent for p in parts]))
+
+    def take(self, order: np.ndarray) -> _Rows:
+        """The rows at ``order``."""
+        return _Rows(self.time[order], self.beacon[order], self.range[order], self.beacon_ned[order],
+                     self.depth[order], self.system_values[order], [self.where[k] for k in order], self.sent[order])
 
 
 def _beacon(text: str, n_beacons: int) -> int:
@@ -321,4 +359,4 @@ def _beacon(text: str, n_beacons: int) -> int:
 
 
 
-__all__ = ["FORMAT", "LOG_COLUMNS", "Log", "REORDER_WINDOW", "log_config", "read_log"]
+__all__ = ["FORMAT", "LOG_COLUMNS", "LOG_ROW_BYTES", "Log", "REORDER_WINDOW", "log_config", "read_log"]

@@ -44,7 +44,8 @@ from sblsim.models.acoustics.sound_speed import fit_rows
 from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import columns, number, read_lines, read_table
+from sblsim.orchestrator.io.log_tables import columns, read_table
+from sblsim.orchestrator.io.tables import number, read_lines
 from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, TRANSPONDER_ID, SurveyLog, check_frame
 from sblsim.orchestrator.surveys.seagap import HEADING_RANGE, NOMINAL_SIGMA_M, OFFSET_RANGE, TILT_RANGE
 

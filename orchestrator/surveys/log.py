@@ -3,9 +3,9 @@
 One row per reply (CSV with a header row and ``#`` comment lines, or Parquet), SI units in the column names
 (:data:`COLUMNS`; docs/calibration.md). Every reader of another format (:mod:`sblsim.orchestrator.surveys.xie`,
 the GNATSS reader) produces this table. :func:`read_survey_log` reads a file with the hostile-safe table reading of
-``sblsim replay`` (:mod:`sblsim.orchestrator.io.tables`: a regular file only, size and row limits before reading,
-line numbers in every error) and refuses any flaw with one line naming the line and the column: a log never
-runs code and never makes us read or write a path it names.
+``sblsim replay`` (:mod:`sblsim.orchestrator.io.log_tables`: a regular file only, read in pieces whatever its length,
+each line's bytes and cells bounded before it is parsed, line numbers in every error) and refuses any flaw with one
+line naming the line and the column: a log never runs code and never makes us read or write a path it names.
 """
 
 from __future__ import annotations
@@ -19,8 +19,10 @@ import pandas as pd
 
 from sblsim.models.calibration import Replies
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.cosim.limits import MEMORY_SHARE, available_memory
+from sblsim.orchestrator.io.log_tables import TextTable, check_fits, columns, table_chunks, table_length
 from sblsim.orchestrator.io.output import write_atomic
-from sblsim.orchestrator.io.tables import NUMBER, columns, number, read_table
+from sblsim.orchestrator.io.tables import NUMBER, number
 
 #: POSIX times accepted [s] (1970 to 2100).
 TIME_RANGE = (0.0, 4_102_444_800.0)
@@ -59,6 +61,11 @@ COLUMNS: dict[str, tuple[str, str, tuple[float, float] | None, str]] = {
 }
 #: The column names in their documented order.
 LOG_COLUMNS = tuple(COLUMNS)
+#: The log's columns of numbers that are not whole (all but ``ping`` and ``transponder``), in their order.
+_FLOATS = tuple(name for name, (kind, *_) in COLUMNS.items() if kind == "float")
+#: The memory a reply takes while its log is read and checked [bytes] (its numbers and id as read, the frame made of
+#: them, the checks' copies and sorted frame, its place in the file; measured on a log of 10**6 replies).
+ROW_BYTES = 700
 #: Title line a written CSV log starts with.
 TITLE = "sblsim calibration survey log, format 1"
 
@@ -162,8 +169,9 @@ def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog
         raise ModelError(f"{source!r} {where[k]}: the replies of ping {ping} have different t_tx_s (one "
                          "transmission has one transmit time)")
     order = np.lexsort((frame["transponder"].to_numpy(str), frame["ping"].to_numpy(), frame["t_tx_s"].to_numpy()))
-    frame = frame.iloc[order].reset_index(drop=True)
-    where = [where[k] for k in order]
+    if np.any(order != np.arange(len(order))):  # a log in order (as recorded, as written) is not copied
+        frame = frame.iloc[order].reset_index(drop=True)
+        where = [where[k] for k in order]
     counts = {"rows": len(frame), "pings": int(frame["ping"].nunique()),
               "transponders": {str(k): int(v) for k, v in frame["transponder"].value_counts().sort_index().items()}}
     return SurveyLog(frame, source, where, counts)
@@ -172,7 +180,11 @@ def check_frame(frame: pd.DataFrame, where: list[str], source: str) -> SurveyLog
 def read_survey_log(path: Path | str) -> SurveyLog:
     """Read a calibration survey log (CSV or Parquet, :data:`COLUMNS`).
 
-    Columns beyond :data:`LOG_COLUMNS` are ignored (counted in ``counts["ignored_columns"]``).
+    Read in pieces (:func:`~sblsim.orchestrator.io.log_tables.table_chunks`), each piece's cells checked and kept as
+    numbers, so that a log of any length is read in the memory its numbers take (about :data:`ROW_BYTES` a reply);
+    one whose replies would not fit in the memory available here is refused before it is read
+    (:func:`~sblsim.orchestrator.io.log_tables.check_fits`). Columns beyond :data:`LOG_COLUMNS` are ignored
+    (counted in ``counts["ignored_columns"]``).
 
     Parameters
     ----------
@@ -187,53 +199,77 @@ def read_survey_log(path: Path | str) -> SurveyLog:
     ------
     ModelError
         One line naming the file, the line (or row) and the column: a missing file, one that is not a regular
-        file, too large, not UTF-8, a missing column, a cell that is not a number or outside its range, a
-        transponder id that is not 1-32 letters, digits, ``_``, ``-`` or ``.``, or the flaws of
-        :func:`check_frame`; or a log without rows.
+        file, one too large for the memory here, a line too long or of too many cells, not UTF-8, a missing column,
+        a cell that is not a number or outside its range, a transponder id that is not 1-32 letters, digits,
+        ``_``, ``-`` or ``.``, or the flaws of :func:`check_frame`; or a log without rows.
     """
     path = Path(path)
     what = "log"
-    table = read_table(path, what)
-    index = columns(table, what)
-    missing = [name for name in LOG_COLUMNS if name not in index]
-    if missing:
-        raise ModelError(f"{what}: {str(path)!r} lacks the column{'s' if len(missing) > 1 else ''} "
-                         f"{', '.join(missing)} (the calibration log's columns: {', '.join(LOG_COLUMNS)})")
-    if not table.rows:
+    rows = table_length(path, what)
+    check_fits(path, what, rows, ROW_BYTES, MEMORY_SHARE * available_memory())
+    header: list[str] = []
+    index: dict[str, int] = {}
+    floats = np.empty((rows, len(_FLOATS)))  # filled piece by piece: the numbers are held once, not joined
+    pings, ids = np.empty(rows, np.int64), np.empty(rows, object)
+    where: list[str] = []
+    for table in table_chunks(path, what):
+        if not header:
+            header, index = table.header, columns(table, what)
+            missing = [name for name in LOG_COLUMNS if name not in index]
+            if missing:
+                raise ModelError(f"{what}: {str(path)!r} lacks the column{'s' if len(missing) > 1 else ''} "
+                                 f"{', '.join(missing)} (the calibration log's columns: {', '.join(LOG_COLUMNS)})")
+        if not table.rows:
+            continue
+        data = _columns(table, index)
+        if data is None:  # a cell that is not what its column takes: found and named, cell by cell
+            _refuse_cell(table, index, what)
+        done = slice(len(where), len(where) + len(table.rows))
+        pings[done], ids[done] = data["ping"], data["transponder"]
+        for j, name in enumerate(_FLOATS):
+            floats[done, j] = data[name]
+        where += [place for place, _ in table.rows]
+    if not where:
         raise ModelError(f"{what}: {str(path)!r} holds no reply (only a header)")
-    where = [place for place, _ in table.rows]
-    data = _columns(table, index)
-    if data is None:  # a cell that is not what its column takes: found and named, cell by cell
-        for place, cells in table.rows:
-            here = f"{what}: {str(path)!r} {place}"
-            for name, (kind, _, bounds, _) in COLUMNS.items():
-                text = cells[index[name]]
-                if kind == "str":
-                    if not TRANSPONDER_ID.fullmatch(text):
-                        raise ModelError(f"{here}: {name}: {text[:40]!r} is not an id (1-32 letters, digits, _, - "
-                                         "or .)")
-                    continue
-                value = number(text, here, name, *bounds)
-                if kind == "int" and value != int(value):
-                    raise ModelError(f"{here}: {name}: {text[:40]!r} is not a whole number")
-    frame = pd.DataFrame(data)
+    n = len(where)
+    frame = pd.DataFrame(floats[:n], columns=list(_FLOATS), copy=False)
+    frame.insert(0, "ping", pings[:n])
+    frame.insert(1, "transponder", ids[:n])
     log = check_frame(frame, where, str(path))
-    log.counts["ignored_columns"] = [name for name in table.header if name not in COLUMNS]
+    log.counts["ignored_columns"] = [name for name in header if name not in COLUMNS]
     return log
 
 
-def _columns(table, index: dict[str, int]) -> dict[str, pd.Series] | None:
-    """The log's columns of a table's text cells, read a column at a time (a log of 100,000 rows in seconds), or
-    None when a cell is not what its column takes (:func:`read_survey_log` then finds and names it)."""
+def _refuse_cell(table: TextTable, index: dict[str, int], what: str) -> None:
+    """Refuse the first cell of a piece of a log that is not what its column takes (its line and column named)."""
+    for place, cells in table.rows:
+        here = f"{what}: {str(table.path)!r} {place}"
+        for name, (kind, _, bounds, _) in COLUMNS.items():
+            text = cells[index[name]]
+            if kind == "str":
+                if not TRANSPONDER_ID.fullmatch(text):
+                    raise ModelError(f"{here}: {name}: {text[:40]!r} is not an id (1-32 letters, digits, _, - or .)")
+                continue
+            value = number(text, here, name, *bounds)
+            if kind == "int" and value != int(value):
+                raise ModelError(f"{here}: {name}: {text[:40]!r} is not a whole number")
+    raise AssertionError("a piece refused as a whole has no bad cell")  # pragma: no cover
+
+
+def _columns(table: TextTable, index: dict[str, int]) -> dict[str, np.ndarray] | None:
+    """The log's columns of a piece's text cells as arrays, a column at a time, or None when a cell is not what its
+    column takes (:func:`_refuse_cell` then finds and names it). The ids are shared strings (one object per id, not
+    per reply)."""
     data = {}
     for name, (kind, _, bounds, _) in COLUMNS.items():
         texts = [cells[index[name]] for _, cells in table.rows]
         if kind == "str":
-            if not all(TRANSPONDER_ID.fullmatch(t) for t in texts):
+            if not all(map(TRANSPONDER_ID.fullmatch, texts)):
                 return None
-            data[name] = pd.Series(texts, dtype=object)
+            ids = pd.Categorical(texts)
+            data[name] = np.asarray(ids.categories, dtype=object)[ids.codes]
             continue
-        if not all(NUMBER.fullmatch(t) for t in texts):
+        if not all(map(NUMBER.fullmatch, texts)):
             return None
         values = np.array(texts, dtype=float)
         if not np.all(np.isfinite(values) & (values >= bounds[0]) & (values <= bounds[1])):
@@ -242,7 +278,7 @@ def _columns(table, index: dict[str, int]) -> dict[str, pd.Series] | None:
             if not np.all(values == np.floor(values)):
                 return None
             values = values.astype(np.int64)
-        data[name] = pd.Series(values)
+        data[name] = values
     return data
 
 
@@ -270,5 +306,5 @@ def write_log(log: SurveyLog, path: Path | str) -> Path:
     return path
 
 
-__all__ = ["COLUMNS", "LOG_COLUMNS", "POSITION_RANGE", "SIGMA_RANGE", "SurveyLog", "TIME_RANGE", "TITLE",
+__all__ = ["COLUMNS", "LOG_COLUMNS", "POSITION_RANGE", "ROW_BYTES", "SIGMA_RANGE", "SurveyLog", "TIME_RANGE", "TITLE",
            "TWTT_RANGE", "check_frame", "read_survey_log", "write_log"]

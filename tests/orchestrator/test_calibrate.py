@@ -187,11 +187,11 @@ def test_missing_columns_duplicates_and_oversize_are_refused(tmp_path, capsys, m
     pd.concat([frame, frame.iloc[[3]]]).to_csv(tmp_path / "twice.csv", index=False)
     assert main(["calibrate", str(tmp_path / "twice.csv"), "--out", str(tmp_path / "o")]) == 2
     assert "line 42: ping 3 has a second reply from transponder '1' (the first: line 5)" in capsys.readouterr().err
-    import sblsim.orchestrator.io.tables as tables
+    import sblsim.orchestrator.surveys.log as log_module  # a log of any length is read; one the memory here cannot
 
-    monkeypatch.setattr(tables, "MAX_LOG_ROWS", 10)
+    monkeypatch.setattr(log_module, "available_memory", lambda: 10 * log_module.ROW_BYTES)  # hold: refused first
     assert main(["calibrate", str(good), "--out", str(tmp_path / "o")]) == 2
-    assert "has more than 10 rows (line 13)" in capsys.readouterr().err
+    assert "holds up to 42 rows, about 0 MiB in memory to read; 0 MiB is available here" in capsys.readouterr().err
     (tmp_path / "folder.csv").mkdir()
     assert main(["calibrate", str(tmp_path / "folder.csv"), "--out", str(tmp_path / "o")]) == 2
     assert "is a directory" in capsys.readouterr().err

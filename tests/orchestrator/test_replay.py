@@ -595,29 +595,28 @@ def test_a_parquet_log_whose_pandas_metadata_disagrees_reads_its_cells(tmp_path)
     assert_same_receiver(result.timeseries, replay_file(strings, truth=False).timeseries)
 
 
-def test_a_log_beyond_the_documented_size_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch):
-    """The limits of docs/log-format.md, made small: rows of a CSV and of a Parquet file, and bytes."""
-    import sblsim.orchestrator.io.tables as module  # the table reading replay shares with the other log readers
+def test_a_log_the_memory_here_cannot_hold_is_refused_before_it_is_read(tmp_path, capsys, monkeypatch):
+    """A log of any length is read in pieces; one whose rows would not fit in the memory here (made small) is refused
+    before it is read, in one line, nothing written: a CSV file by its lines, a Parquet file by its footer's rows."""
+    from sblsim.orchestrator.logs import receiver_log
 
     log = tmp_path / "many.csv"
     log.write_text(HEADER + "".join(f"{0.1 * k!r},1,6,1,0,1,2\n" for k in range(1, 12)))
-    monkeypatch.setattr(module, "MAX_LOG_ROWS", 10)
-    assert main(["replay", str(log), "--out", str(tmp_path / "o")]) == 2
-    assert "has more than 10 rows (line 12)" in capsys.readouterr().err
     parquet = tmp_path / "many.parquet"
     pd.read_csv(log).to_parquet(parquet)
-    assert main(["replay", str(parquet), "--out", str(tmp_path / "o")]) == 2
-    assert "has 11 rows; a log is read whole, at most 10 rows" in capsys.readouterr().err
-    monkeypatch.setattr(module, "MAX_LOG_ROWS", 100)
-    monkeypatch.setattr(module, "MAX_LOG_BYTES", 100)
-    assert main(["replay", str(log), "--out", str(tmp_path / "o")]) == 2
-    err = capsys.readouterr().err
-    assert len(err.splitlines()) == 1 and "MiB" in err and "a log is read whole" in err, err
+    monkeypatch.setattr(receiver_log, "available_memory", lambda: 10 * receiver_log.LOG_ROW_BYTES)
+    for path, rows in ((log, log.read_text().count("\n")), (parquet, 11)):
+        assert main(["replay", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1 and f"{str(path)!r} holds up to {rows} rows" in err, err
+        assert "is available here: read it on a machine with more memory, or in parts" in err
     assert not (tmp_path / "o").exists()
+    monkeypatch.setattr(receiver_log, "available_memory", lambda: 100 * receiver_log.LOG_ROW_BYTES)
+    assert main(["replay", str(log), "--out", str(tmp_path / "o")]) == 0
 
 
 def test_the_documented_log_limits_are_the_code_s():
-    from sblsim.orchestrator.io.tables import MAX_LOG_BYTES, MAX_LOG_ROWS
+    from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, MAX_LINE_CELLS
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "log-format.md").read_text()
-    assert f"{MAX_LOG_ROWS:,}" in doc and f"{MAX_LOG_BYTES // 2**20} MiB" in doc
+    assert f"**{MAX_LINE_BYTES // 2**20} MiB**" in doc and f"**{MAX_LINE_CELLS}** cells" in doc

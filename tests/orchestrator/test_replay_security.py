@@ -23,7 +23,7 @@ import tomli_w
 
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.run import run
-from sblsim.orchestrator.io.tables import CONFIG_PREFIX, META_CONFIG
+from sblsim.orchestrator.io.log_tables import CONFIG_PREFIX, META_CONFIG
 from sblsim.orchestrator.logs.log_export import export_log
 from sblsim.orchestrator.logs.receiver_log import log_config
 

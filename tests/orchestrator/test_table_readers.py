@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import csv_cells, read_table
+from sblsim.orchestrator.io.log_tables import read_table
+from sblsim.orchestrator.io.tables import csv_cells
 from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
 from sblsim.orchestrator.readers.receivers_file import read_receivers
 from sblsim.orchestrator.readers.time_series import read_track

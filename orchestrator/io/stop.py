@@ -1,0 +1,112 @@
+"""One way to stop a command: Ctrl-C (SIGINT), SIGTERM or SIGHUP, wherever the command is.
+
+The command line handles the three signals with :func:`stop_on`'s handler: the signal is recorded (the stop is
+*pending*) and raised at once as :class:`KeyboardInterrupt`, so that Python code stops at its next instruction.
+Where the handler runs inside a compiled library's call, the library may report the exception as its own error
+and drop it: casadi's wrapper as ``NotImplementedError: Wrong number or type of arguments for function
+'Function_call'`` or a ``TypeError``, CPython as ``SystemError: ... returned a result with an exception set``, a
+numpy or scipy solve as whatever it raises next. The stop stays pending all the same: every long loop checks it at
+its natural step (:func:`check`, called by :meth:`sblsim.orchestrator.io.progress.Progress.update` each time a
+unit of work is done), and an exception that comes out of the work while a stop is pending is the stop, not an
+error (:func:`is_stop`). The command then ends with one line and :func:`exit_status`: 128 + the signal (130 for
+SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+
+A signal a parent process set to be ignored (``nohup``'s SIGHUP, a background job's SIGINT) stays ignored. The
+Python API installs no handler: its callers' own handling of signals is theirs.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from typing import Iterator
+
+#: The signals that stop a command, by name (those the platform has).
+SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+#: A command's exit status when a signal stopped it is this plus the signal's number (POSIX shells' rule).
+SIGNAL_STATUS_BASE = 128
+#: The exit status of a stop without a recorded signal (a KeyboardInterrupt raised otherwise): Ctrl-C's.
+EXIT_INTERRUPTED = SIGNAL_STATUS_BASE + int(signal.SIGINT)
+
+#: The signals received since :func:`stop_on` began, in order (empty: no stop is pending).
+_RECEIVED: list[int] = []
+#: Whether the handler raises (False while a command that is stopping finishes its last lines).
+_RAISING = [True]
+
+
+def _handler(signum: int, frame) -> None:
+    """The stop's signal handler: recorded, then raised as KeyboardInterrupt (unless the command is ending)."""
+    _RECEIVED.append(signum)
+    if _RAISING[0]:
+        raise KeyboardInterrupt
+
+
+def pending() -> int | None:
+    """The signal of the pending stop (the first received), or None."""
+    return _RECEIVED[0] if _RECEIVED else None
+
+
+def check() -> None:
+    """Raise :class:`KeyboardInterrupt` when a stop is pending (a long loop's check at its natural step: its
+    exception was lost in a compiled library's call, or the signal came between two of its steps)."""
+    if _RECEIVED and _RAISING[0]:
+        raise KeyboardInterrupt
+
+
+def is_stop(exc: BaseException) -> bool:
+    """Whether ``exc``, having ended a command, is its stop: a stop is pending (whatever ``exc`` is: the error a
+    compiled library made of the signal's exception), or ``exc`` is or was caused by a
+    :class:`KeyboardInterrupt` (CPython's ``SystemError`` from an extension's call that returned a value with one
+    set, a campaign's own account of what it saved)."""
+    if _RECEIVED:
+        return True
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def exit_status() -> int:
+    """The exit status of a stopped command: 128 + the pending stop's signal, else :data:`EXIT_INTERRUPTED`."""
+    signum = pending()
+    return SIGNAL_STATUS_BASE + signum if signum is not None else EXIT_INTERRUPTED
+
+
+@contextmanager
+def ending() -> Iterator[None]:
+    """A command's last lines (its stop said, its locks released): a further signal is recorded, not raised."""
+    raising = _RAISING[0]
+    _RAISING[0] = False
+    try:
+        yield
+    finally:
+        _RAISING[0] = raising
+
+
+@contextmanager
+def stop_on() -> Iterator[None]:
+    """Handle :data:`SIGNALS` as stops while the body runs (the main thread only: signals are handled there),
+    every signal the process does not ignore; the pending stop cleared on entry and on exit, the earlier handlers
+    restored on exit (one not set from Python as the default)."""
+    _RECEIVED.clear()
+    _RAISING[0] = True
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for name in SIGNALS:
+            number = getattr(signal, name, None)
+            if number is not None and signal.getsignal(number) is not signal.SIG_IGN:
+                previous[number] = signal.signal(number, _handler)
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, signal.SIG_DFL if handler is None else handler)
+        _RECEIVED.clear()
+
+
+__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "check", "ending", "exit_status", "is_stop",
+           "pending", "stop_on"]
