@@ -282,8 +282,10 @@ MAX_FIXES = 5000
 
 
 def moved(fixes: np.ndarray, times: np.ndarray, trusted: np.ndarray, seed: int = 0) -> tuple[int, float, bool]:
-    """Whether the pings refute one position for the tag: a permutation test of the trusted single-ping fixes'
-    order in time (:func:`~sblsim.models.tracking.quality.trusted_fixes`). Of a still tag the fixes scatter about the
+    """Whether the trusted single-ping fixes (:func:`~sblsim.models.tracking.quality.trusted_fixes`) lie in an order
+    in time: a permutation test, one input of a still tag's verdict (:func:`~sblsim.models.tracking.still.still_verdict`
+    decides: a still tag's fixes wander slowly with the water's sound speed, in an order this test alone calls
+    motion, for every real still tag). Fixes with independent errors scatter about the
     position in no order (their errors are the pings' own), so successive fixes lie as far apart as any two; of a
     moving one successive fixes lie close. The statistic is the median distance between successive fixes over the
     median distance of the fixes from their median, a robust form of von Neumann's ratio of the mean square successive
@@ -306,7 +308,7 @@ def moved(fixes: np.ndarray, times: np.ndarray, trusted: np.ndarray, seed: int =
     -------
     tuple
         The trusted fixes, the ratio (NaN with fewer than :data:`MIN_FIXES`; of every j-th in time beyond
-        :data:`MAX_FIXES`), and whether the tag moved.
+        :data:`MAX_FIXES`), and whether they lie in order.
     """
     fixes = np.asarray(fixes, float)[:, :2]
     k = np.flatnonzero(np.asarray(trusted, bool) & np.isfinite(fixes).all(axis=1) & np.isfinite(times))
