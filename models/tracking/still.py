@@ -15,6 +15,8 @@ correlation of length :data:`SLOW_TIME_S`, represented by the cosines of its Hil
 span (the Laplacian's eigenfunctions with Neumann ends, each weighted by the kernel's spectral density at its
 frequency: Solin & Särkkä, "Hilbert space methods for reduced-rank Gaussian process regression", Statistics and
 Computing 30, 2020, § 3): ``n(t_k) = G_k θ``, ``θ ~ N(0, I)``, a few dozen columns whatever the number of fixes.
+The receivers' survey is the same at every ping: it moves the place, not the fixes over time (but through each
+ping's receivers heard, which the dispersion takes), and is the place's consider term, not the wander's.
 
 A tag that moved at fix τ adds a step ``δ`` to every fix from τ on. With ``μ`` and ``δ`` unknown, the generalised
 likelihood ratio of "a step at τ" against "one position" (the covariance ``Σ = diag(s² R_k) + G Gᵀ`` known) is
