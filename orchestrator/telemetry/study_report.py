@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from sblsim.orchestrator.tracks.depth import water_line
+from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE
 from sblsim.orchestrator.tracks.tracker import noise_line
 
 
@@ -82,6 +83,11 @@ def tag_lines(table: Any) -> list[tuple[str, bool]]:
     for row in table.itertuples(index=False):
         if row.status == "tracked":
             lines.append((tag_line(row), False))
+            if row.sound_speed_source in ("fallback", REPLACED_SOURCE):  # never taken without a word
+                lines.append((f"sblsim: warning: tag {row.tag}: the pings do not determine the sound speed "
+                              f"({row.sound_speed_source}); taken: {row.sound_speed_m_s:.1f} m/s, every range scales "
+                              "with it: give --sound-speed, --sound-speed-file or --temperature with --salinity",
+                              True))
     for row in refused.head(MAX_REFUSED_LINES).itertuples(index=False):
         lines.append((f"sblsim: warning: tag {row.transmitter} not tracked ({row.reason_code}): {row.reason}", True))
     rest = refused.iloc[MAX_REFUSED_LINES:]

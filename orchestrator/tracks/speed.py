@@ -82,12 +82,8 @@ def _plausible(speed: dict[str, Any], temperature: float | None, salinity: float
 
 
 def replaced_line(speed: dict[str, Any]) -> str | None:
-    """The console's warning on a calibration the stated water cannot have, or that the pings could not make (the
-    fallback taken: ``summary.json``'s ``sound_speed``), after ``sblsim: warning:``; None where the calibration was
-    kept."""
-    if speed.get("source") == "fallback" and speed.get("calibration"):
-        return (f"the pings could not calibrate the sound speed ({speed['calibration']}); taken instead: "
-                f"{speed['method']}, {speed['sound_speed_m_s']:.1f} m/s (every range scales with it)")
+    """The console's warning on a calibration the stated water cannot have (``summary.json``'s ``sound_speed``),
+    after ``sblsim: warning:``; None where the calibration was kept."""
     if speed.get("source") != REPLACED_SOURCE:
         return None
     low, high = speed["plausible_m_s"]

@@ -1,23 +1,35 @@
-"""A sound speed the pings cannot calibrate is replaced by the fallback only with a warning line
-(orchestrator/tracks/speed.py ``replaced_line``; issue 98 item 3): never silently."""
+"""A sound speed the pings cannot calibrate is replaced by the fallback only with a warning line (issue 98 item 3):
+the replay says it once (tests/orchestrator/test_tracking_medium.py), the study once per tag that took it
+(orchestrator/telemetry/study_report.py ``tag_lines``); never silently."""
 
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
-from sblsim.orchestrator.tracks.speed import replaced_line, sound_speed_stage
+from sblsim.orchestrator.telemetry.study_report import tag_lines
+from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE, sound_speed_stage
 
 
-def test_a_failed_calibration_takes_the_fallback_and_says_so():
+def test_a_failed_calibration_takes_the_fallback_with_its_reason():
     receivers = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0], [100.0, 100.0]])
     tag = np.array([40.0, 30.0])
     toa = 10.0 + np.linalg.norm(receivers - tag, axis=1)[None, :] / 1480.0  # one ping: nothing to calibrate from
     _, speed, info = sound_speed_stage(toa, receivers)
-    assert info["source"] == "fallback" and info["calibration"]
-    line = replaced_line(info)
-    assert line is not None and "\n" not in line and f"{speed:.1f} m/s" in line and info["calibration"] in line
+    assert info["source"] == "fallback" and info["calibration"] and speed == info["sound_speed_m_s"]
 
 
-def test_a_kept_calibration_or_a_given_speed_says_nothing():
-    assert replaced_line({"source": "given", "sound_speed_m_s": 1480.0}) is None
-    assert replaced_line({"source": "calibrated", "sound_speed_m_s": 1480.0}) is None
+def _row(tag: str, source: str, speed: float) -> dict:
+    return {"transmitter": tag, "tag": tag, "status": "tracked", "reason": "", "reason_code": "", "pings": 10,
+            "positioned": 10, "set_aside": 0, "not_positioned": 0, "not_positioned_why": "", "flagged": 0,
+            "median_sigma_m": 1.0, "ping_type": "rbi", "ping_type_stated": "inferred", "sound_speed_m_s": speed,
+            "sound_speed_source": source, "first_utc": "", "last_utc": "", "detections": 30}
+
+
+def test_the_study_warns_for_each_tag_that_took_the_fallback():
+    table = pd.DataFrame([_row("A", "calibrated", 1476.5), _row("B", "fallback", 1500.0),
+                          _row("C", REPLACED_SOURCE, 1482.3)])
+    warnings = [line for line, warning in tag_lines(table) if warning]
+    assert len(warnings) == 2
+    assert "tag B" in warnings[0] and "1500.0 m/s" in warnings[0] and "--sound-speed" in warnings[0]
+    assert "tag C" in warnings[1] and "1482.3 m/s" in warnings[1]

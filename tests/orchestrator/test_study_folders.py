@@ -14,7 +14,7 @@ from sblsim.orchestrator.telemetry.study import TAGS_FOLDER
 
 def test_tags_named_like_the_studys_files_keep_to_their_folders(tmp_path):
     sim = simulate_study(n_receivers=6, n_tags=2, days=0.1, redeployed=0, seed=4)
-    files = sim.write(tmp_path / "files", "vue")
+    sim.write(tmp_path / "files", "vue")
     names = {"A69-1602-1000": "tracks.csv", "A69-1602-1001": "sync"}
     ids = sim.detections["transmitter"].map(lambda t: names.get(t, t.rsplit("-", 1)[1]))
     whole = np.floor(sim.detections["time"].to_numpy())
