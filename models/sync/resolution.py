@@ -88,10 +88,11 @@ def resolution_warning(times: np.ndarray, travel_time: float, sound_speed: float
     sigma = rounding_sigma(q)
     if sigma < RESOLVABLE * travel_time:
         return None
+    where = (f"where the largest travel time across the array is {1000 * travel_time:.3g} ms" if travel_time > 0 else
+             "one receiver: no travel time across an array to weigh it against")
     return (f"{what}: every time is a whole multiple of {q:g} s (a rounding error of {1000 * sigma:.3g} ms, "
-            f"{sigma * sound_speed:.3g} m of range, where the largest travel time across the array is "
-            f"{1000 * travel_time:.3g} ms): positions from these times are poor whatever the solver; export the "
-            "detections with their sub-second times")
+            f"{sigma * sound_speed:.3g} m of range, {where}): positions from these times are poor whatever the "
+            "solver; export the detections with their sub-second times")
 
 
 class RoundingError(ModelError):

@@ -29,3 +29,10 @@ def test_the_warning_weighs_the_rounding_against_the_travel_time():
     assert resolution_warning(np.round(raw, 3), 400.0 / 1480.0, 1480.0, "det.csv") is None
     assert resolution_warning(np.round(raw, 1), 40000.0 / 1480.0, 1480.0, "det.csv") is None
     assert resolution_warning(raw, 400.0 / 1480.0, 1480.0, "det.csv") is None
+
+
+def test_one_receiver_is_said_as_such():
+    """One receiver has no travel time across an array: the rounding said without a nonsense 0 ms."""
+    raw = 1.7e9 + np.random.default_rng(2).uniform(0, 3600, 200)
+    line = resolution_warning(np.round(raw), 0.0, 1480.0, "det.csv")
+    assert line is not None and "one receiver" in line and "0 ms" not in line
