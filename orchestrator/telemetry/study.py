@@ -59,6 +59,7 @@ from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
+from sblsim.orchestrator.telemetry.report.daily import daily_counts
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
@@ -72,6 +73,9 @@ TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated
                "not_positioned_why", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
                "sound_speed_m_s", "sound_speed_source", "time_resolution_s", "first_utc", "last_utc", "folder",
                "wall_time_s")
+#: The columns of ``tags.csv`` that are counts (whole numbers; empty for a tag never detected).
+COUNT_COLUMNS = ("detections", "receivers", "pings", "pings_at_once", "positioned", "set_aside", "not_positioned",
+                 "flagged")
 #: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
 TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
                  "quality", "quality_reason")
@@ -97,6 +101,8 @@ class StudyOutcome:
         Each tag's :class:`~sblsim.orchestrator.sync.toa.ToaOutcome`, by its folder's name.
     sync : SyncOutcome or None
         The synchronisation made here (None where given or taken as logged).
+    daily : pandas.DataFrame or None
+        The kept detections per deployment and UTC day (``detections_daily.csv``: :mod:`.report.daily`).
     """
 
     tracks: pd.DataFrame
@@ -106,6 +112,7 @@ class StudyOutcome:
     outcomes: dict[str, Any] = field(default_factory=dict)
     matrices: dict[str, Any] = field(default_factory=dict)
     sync: Any = None
+    daily: Any = None
 
 
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
@@ -365,13 +372,15 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
     outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
     table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
+    table_tags = table_tags.astype({c: "Int64" for c in COUNT_COLUMNS})  # counts as counts, empty where none
     tracks = combined_tracks(outcomes, matrices)
     summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
                        "refused": int((table_tags["status"] == "refused").sum()),
                        "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
                                    if k}}
     summary["wall_time_s"] = clock.perf_counter() - begun
-    return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced)
+    return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
+                        daily_counts(assigned.detections.frame))
 
 
 def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
