@@ -17,7 +17,7 @@ from sblsim.orchestrator.io.arguments import path_argument, prepare_out
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
-from sblsim.orchestrator.telemetry.study_report import closing_line, tag_lines
+from sblsim.orchestrator.telemetry.study_report import closing_line, reference_lines, tag_lines
 from sblsim.orchestrator.telemetry.study_run import _run
 from sblsim.orchestrator.tracks.options import sound_speed_arguments, water_arguments
 from sblsim.orchestrator.tracks.outputs import figure
@@ -53,6 +53,10 @@ class StudyResult:
         Each tracked tag's own outcome (:class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`: ``track``,
         ``estimates`` (every estimator's rows), ``summary``), by tag.
     out : Path or None
+    reference_tags : pandas.DataFrame
+        ``reference_tags.csv``: each reference tag's place against its known position and each sync tag left out of
+        the synchronisation in turn (``kind``), its error [m], σ [m], 2-D NEES and rows flagged
+        (:mod:`sblsim.orchestrator.telemetry.reference_tags`; pooled in ``summary["reference_tags"]``).
     """
 
     tracks: pd.DataFrame
@@ -61,6 +65,7 @@ class StudyResult:
     summary: dict[str, Any]
     tracked: dict[str, Any] = field(default_factory=dict)
     out: Path | None = None
+    reference_tags: pd.DataFrame | None = None
     _outcome: Any = field(default=None, repr=False)
 
     def plot(self) -> dict[str, Figure]:
@@ -153,7 +158,8 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         detections show.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
-        ``tracks.geojson``, ``map.png``, ``sync/``, ``tags/``: a folder per tag), all or nothing.
+        ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``sync/``, ``tags/``: a folder per tag), all or
+        nothing.
     force : bool
         Replace an earlier study in ``out``.
     progress : bool, str or callable
@@ -191,8 +197,11 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
 
 
 def _result(outcome, target: Path | None) -> StudyResult:
+    from sblsim.orchestrator.telemetry.reference_tags import table  # pandas: loaded with the study
+
     return StudyResult(outcome.tracks, outcome.tags, outcome.deployments.written(), outcome.summary,
-                       {outcome.matrices[f].summary["tag"]: o for f, o in outcome.outcomes.items()}, target, outcome)
+                       {outcome.matrices[f].summary["tag"]: o for f, o in outcome.outcomes.items()}, target,
+                       table(outcome.summary.get("reference_tags")), outcome)
 
 
 NAME = "track"
@@ -271,12 +280,12 @@ def main(args: argparse.Namespace) -> int:
 
     detections = args.detections[0] if len(args.detections) == 1 else DetectionFiles(args.detections)
     outcome = _run(detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
-    for line, warning in tag_lines(outcome.tags):
+    for line, warning in tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags")):
         print(line, file=sys.stderr if warning else sys.stdout)
     for note in outcome.summary["notes"]:
         print(f"note: {note}", file=sys.stderr)
     print(closing_line(outcome.tags, outcome.summary["wall_time_s"], out,
-                       f"tracks.csv, tags.csv, receivers.csv, study.json, "
+                       f"tracks.csv, tags.csv, receivers.csv, reference_tags.csv, study.json, "
                        f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
                        f"{'sync/, ' if outcome.sync is not None else ''}tags/: a folder per tag"))
     return 0

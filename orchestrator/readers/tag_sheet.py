@@ -17,7 +17,11 @@ One row per transmitter (header names matched case-insensitively, a trailing uni
   carry (VUE's ``ADC`` unit, Fathom's ``Raw Data``) is ``slope × r + intercept`` in the sensor's unit (a depth in
   metres, positive down; a ``sensor_unit`` given for a depth sensor must be metres); a value a file gives converted
   (unit ``m``) is taken as it is;
-* ``name`` (or ``animal_id``): a label kept in the outputs.
+* ``name`` (or ``animal_id``): a label kept in the outputs;
+* a reference tag's surveyed position (its study's accuracy check: :mod:`sblsim.orchestrator.telemetry.reference_tags`):
+  ``lat``, ``lon`` (or ``latitude``, ``longitude``) [° WGS 84], both or neither, and ``depth_m`` [m, positive down];
+  or ``receiver`` (or ``station``, ``deployment``): the deployment it sits at (its name, serial or station), whose
+  position it takes; ``survey_sigma_m`` [m]: that position's error per horizontal axis.
 
 The sheet may also be a workbook (``.xls``, ``.xlsx``: :mod:`.workbook`): Innovasea's tag specifications (sheet
 ``Tag Summary``: ``VUE Tag ID``, each step's ``Min Delay`` and ``Max Delay``, ``Sensor type``, ``Units``, ``Slope``,
@@ -49,6 +53,7 @@ from sblsim.orchestrator.readers.cells import (
     shown_header,
     text_table,
 )
+from sblsim.orchestrator.readers.deployments import DEPTH_RANGE, _blank
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
 from sblsim.orchestrator.readers.otn_tags import otn_table, releases
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
@@ -76,7 +81,11 @@ ALIASES = {
     "sensor_type": ("sensor_type",), "slope": ("sensor_slope", "slope"), "intercept": ("sensor_intercept",
                                                                                        "intercept"),
     "name": ("name", "animal_id"), "unit": ("sensor_unit", "sensor_units"),
+    "lat": ("lat", "latitude"), "lon": ("lon", "long", "longitude"), "depth": ("depth_m", "surveyed_depth"),
+    "receiver": ("receiver", "station", "deployment"), "survey_sigma": ("survey_sigma_m", "survey_sigma"),
 }
+#: The largest survey error a sheet may state [m] (per horizontal axis).
+MAX_SURVEY_SIGMA = 1000.0
 
 
 @dataclass(frozen=True)
@@ -107,6 +116,14 @@ class TagSpec:
         A label (``""``).
     line : int
         The sheet's line.
+    lat, lon : float
+        A reference tag's surveyed position [° WGS 84] (NaN where not given).
+    depth : float
+        Its depth [m, positive down] (NaN).
+    receiver : str
+        The deployment it sits at (a name, serial or station; ``""``).
+    survey_sigma : float
+        Its surveyed position's error per horizontal axis [m] (NaN: not stated).
     """
 
     transmitter: str
@@ -121,6 +138,11 @@ class TagSpec:
     intercept: float = float("nan")
     name: str = ""
     line: int = 0
+    lat: float = float("nan")
+    lon: float = float("nan")
+    depth: float = float("nan")
+    receiver: str = ""
+    survey_sigma: float = float("nan")
 
     def shortest_interval(self) -> float | None:
         """[s] the shortest interval the sheet states (the echo limit of the times-of-arrival matrix), None where
@@ -288,6 +310,21 @@ def tag_table(header: list[str], body: pd.DataFrame, lines: list[int], path: Pat
                      + ", ".join(UNITS["metres"][:3]) + " or empty (the value slope x raw + intercept, in metres)")
     sequences = text("burst_sequence")
     labels = text("name").str.slice(0, 80)
+    def surveyed(key: str, low: float, high: float, unit: str) -> np.ndarray:  # NA, NaN: not given
+        if index[key] is None:
+            return np.full(len(body), np.nan)
+        return numbers(_blank(body[index[key]]), what, name, lines, header[index[key]], low, high, missing=True,
+                       unit=unit)
+
+    lat, lon = surveyed("lat", -90.0, 90.0, "°"), surveyed("lon", -180.0, 180.0, "°")
+    halves = np.flatnonzero(np.isfinite(lat) != np.isfinite(lon))
+    if len(halves):
+        k = int(halves[0])
+        raise ModelError(f"{what}: {name!r} line {lines[k]}: a surveyed position needs both lat and lon; allowed: "
+                         "both (WGS 84 degrees) or neither")
+    depth = surveyed("depth", *DEPTH_RANGE, "m (positive down)")
+    survey = surveyed("survey_sigma", 0.0, MAX_SURVEY_SIGMA, "m")
+    at = text("receiver").str.slice(0, 80)
     tags = []
     for k in range(len(body)):
         where = f"{what}: {name!r} line {lines[k]}"
@@ -313,7 +350,8 @@ def tag_table(header: list[str], body: pd.DataFrame, lines: list[int], path: Pat
         motion = motions[k] or ("stationary" if roles[k] == "reference" else "moving")
         tags.append(TagSpec(transmitter.iloc[k], roles[k], motion, kind, bounds if kind == "rbi" else None,
                             float(stable) if kind == "sbi" and stable is not None else None, sequence, sensors[k],
-                            float(slope[k]), float(intercept[k]), labels.iloc[k], lines[k]))
+                            float(slope[k]), float(intercept[k]), labels.iloc[k], lines[k], float(lat[k]),
+                            float(lon[k]), float(depth[k]), at.iloc[k], float(survey[k])))
     return TagSheet(tags, name)
 
 
@@ -323,5 +361,5 @@ def spec_for(sheet: TagSheet | None, transmitter: str) -> TagSpec:
     return found or TagSpec(transmitter)
 
 
-__all__ = ["ALIASES", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec", "read_tag_sheet",
-           "spec_for", "tag_table"]
+__all__ = ["ALIASES", "MAX_SURVEY_SIGMA", "MAX_TAGS", "MOTIONS", "RAW_UNITS", "ROLES", "SENSORS", "TagSheet", "TagSpec",
+           "read_tag_sheet", "spec_for", "tag_table"]

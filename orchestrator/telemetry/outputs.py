@@ -4,9 +4,11 @@
 ``used``, ``not_used`` and ``detections``: :mod:`sblsim.orchestrator.readers.in_water`), ``study.json`` (the
 summary: the files, the frame and its CRS, the detections set aside, the deployments used and not, the clocks, the
 tags), ``tracks.geojson`` (RFC 7946: the receivers used as points, each tag's rows not flagged as a line, WGS 84
-longitude and latitude; where the frame is known), ``map.png`` (:func:`study_map`), the synchronisation made
-(``sync/``, as ``sblsim sync`` writes it) and one folder per tag (its ``toa.txt``, ``receivers.csv``,
-``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes them).
+longitude and latitude; where the frame is known), ``reference_tags.csv`` (the reference tags and the sync tags
+left out in turn, scored against their known positions: :mod:`.reference_tags`), ``map.png``
+(:func:`study_map`), the synchronisation made (``sync/``, as ``sblsim sync`` writes it) and one folder per tag
+(its ``toa.txt``, ``receivers.csv``, ``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes
+them).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from sblsim.orchestrator.readers.in_water import SAID
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
+from sblsim.orchestrator.telemetry import reference_tags as references
 from sblsim.orchestrator.telemetry.study import StudyOutcome
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
@@ -270,6 +273,7 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     outcome.tracks.to_csv(folder / "tracks.csv", index=False)
     outcome.tags.to_csv(folder / "tags.csv", index=False)
     outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
+    references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
     (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
     shapes = geojson(outcome)
     if shapes is not None:

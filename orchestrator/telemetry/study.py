@@ -23,9 +23,11 @@ latitude, longitude and UTC.
    stationary; of the causal filters only the EKF the smoothers start from) in worker processes or on a Dask
    scheduler (:func:`~sblsim.orchestrator.tracks.many.run_tracks`). A tag that cannot be tracked is a row saying
    why; the others finish. Every ping of a tag is counted once in its row (:mod:`.tag_rows`).
-4. The tracks together (``tracks.csv``: ``tag``, ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``,
-   ``sigma_x``, ``sigma_y``, ``quality``, ...), a row per tag (``tags.csv``), the deployments (``receivers.csv``)
-   and the summary (``study.json``): :mod:`.outputs`.
+4. The reference tags and the sync tags left out of the synchronisation in turn scored against their known
+   positions (:mod:`.reference_tags`: ``study.json``'s ``reference_tags``).
+5. The tracks together (``tracks.csv``: ``tag``, ``time_utc``, ``epoch_s``, ``lat``, ``lon``, ``x``, ``y``,
+   ``sigma_x``, ``sigma_y``, ``quality``, ...), a row per tag (``tags.csv``), the deployments (``receivers.csv``),
+   the reference tags' scores (``reference_tags.csv``) and the summary (``study.json``): :mod:`.outputs`.
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
+from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.report.daily import daily_counts
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
@@ -378,6 +381,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                        "refused": int((table_tags["status"] == "refused").sum()),
                        "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
                                    if k}}
+    summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync)
     summary["wall_time_s"] = clock.perf_counter() - begun
     return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
                         daily_counts(assigned.detections.frame))

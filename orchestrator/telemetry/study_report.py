@@ -1,5 +1,6 @@
-"""The console's lines of a telemetry study before its tags are tracked (``sblsim track``): the detections, the
-frame, the clocks, the timing noise, the water's depth and the tags, made from the study's summary.
+"""The console's lines of a telemetry study (``sblsim track``), made from the study's summary: before its tags are
+tracked the detections, the frame, the clocks, the timing noise, the water's depth and the tags; after, each tag's
+line, the reference tags' and the sync tags' scores and the closing line.
 """
 
 from __future__ import annotations
@@ -98,6 +99,48 @@ def tag_lines(table: Any) -> list[tuple[str, bool]]:
     return lines
 
 
+def reference_lines(scored: dict[str, Any] | None) -> list[tuple[str, bool]]:
+    """The console's lines of a study's reference tags and sync tags left out in turn (``scored``: ``study.json``'s
+    ``reference_tags``, :mod:`.reference_tags`), each with whether it is for standard error: one line each, pooled;
+    a warning per reference tag beyond its σ; a note per reference tag not scored."""
+    if not scored:
+        return []
+    out: list[tuple[str, bool]] = []
+    ref, loo = scored["reference"], scored["sync_left_out"]
+    if ref is not None:
+        nees = "no NEES" if ref["nees_mean"] is None else \
+            f"NEES {ref['nees_mean']:.2g} ({ref['nees_consistent_90'][0]:.2g} to {ref['nees_consistent_90'][1]:.2g} " \
+            f"in 90 % of studies whose σ holds)"
+        exact = "" if ref["survey_stated"] == ref["tags"] else \
+            f", {ref['tags'] - ref['survey_stated']} of {ref['tags']} positions taken as exact (no survey_sigma_m)"
+        out.append((f"  reference tags: {ref['tags']}, median error {ref['median_error_m']:.2g} m, {nees}, "
+                    f"{ref['flagged']:,} of the {_plural(ref['rows'], 'row')} flagged (σ: each place's covariance as "
+                    f"tracked{exact})", False))
+    if loo is not None:
+        inside = "" if loo["nees_mean_inside"] is None else \
+            f", NEES {loo['nees_mean_inside']:.3g} inside the array ({loo['inside']})"
+        out.append((f"  sync tags left out in turn (their single-emission fixes): {loo['tags']}, median error "
+                    f"{loo['median_error_m']:.3g} m{inside}, {loo['without_fix']:,} of "
+                    f"{_plural(loo['emissions'], 'emission')} without a trusted fix", False))
+    array = scored.get("array_persistent_m")
+    for row in scored["tags"]:
+        if row["kind"] != "reference" or not row["beyond_sigma"]:
+            continue
+        kept = row["receiver_persistent_m"]
+        sync = "" if kept is None or kept != kept else \
+            (f"; the synchronisation's residuals at {row['receiver']} keep {kept:.2g} m its clock does not explain"
+             + ("" if array is None else f" (the array's median {array:.2g} m)"))
+        out.append((f"sblsim: warning: reference tag {row['tag']} is {row['error_m']:.3g} m from {row['truth']}, NEES "
+                    f"{row['nees']:.3g} beyond its σ of {row['sigma_m']:.2g} m (χ²(2)'s 99 %: "
+                    f"{scored['reference']['beyond_nees']:.3g}): the tag moved, its position is wrong, or a receiver's "
+                    f"is{sync}", True))
+    for entry in scored["not_scored"]:
+        out.append((f"note: reference tag {entry['tag']} not scored: {entry['why']}", True))
+    for note in scored.get("notes", []):
+        out.append((f"note: {note}", True))
+    return out
+
+
 def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
     """The console's last line: the tags tracked and refused by reason (``table``: ``tags.csv``), their rows
     positioned and flagged, the time, and the files written to ``out`` (``files``: their names)."""
@@ -110,4 +153,4 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
         f"written to {out}/ ({files})"
 
 
-__all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "tag_line", "tag_lines"]
+__all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "reference_lines", "tag_line", "tag_lines"]

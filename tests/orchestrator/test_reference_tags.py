@@ -1,0 +1,193 @@
+"""Reference tags as the study's own accuracy check (issue 97, item 2): a study's reference tags at a known position
+(the tag sheet's ``lat``, ``lon``; a ``receiver`` column naming a deployment; a deployment's sync-tag cell naming
+it) and its sync tags left out of the synchronisation in turn are scored in ``reference_tags.csv``, ``study.json``'s
+``reference_tags`` and the console, per tag and pooled.
+
+The study is simulated (:func:`sblsim.orchestrator.telemetry.simulate.simulate_study`): three of its sync tags, each
+at its receiver's true position, given as reference tags. Every figure is checked against a scoring made here with
+numpy from ``tracks.csv``, each tag's ``summary.json`` covariance and ``estimates.csv``, the simulated positions (the
+truth), and the synchronisation's own ``sync_tags.csv``."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.readers.tag_sheet import read_tag_sheet
+from sblsim.orchestrator.telemetry.outputs import write_study
+from sblsim.orchestrator.telemetry.reference_tags import beyond, given_sync_tags, score_reference, sync_rows
+from sblsim.orchestrator.telemetry.simulate import simulate_study
+from sblsim.orchestrator.telemetry.study import run_study
+from sblsim.orchestrator.telemetry.study_report import reference_lines
+
+#: The stated survey error of the reference tag given by latitude and longitude [m].
+SURVEY = 0.5
+#: The deployments whose sync tags are the reference tags: the grid's middle and two sides' middles.
+AT = (4, 1, 3)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """A 6-hour study of 9 receivers on a 3 × 3 grid: the sync tags of the middle one and of two at the sides' middles
+    given as reference tags, the first by its true position in latitude and longitude (and a survey σ), the second by
+    a ``receiver`` column naming its station (both their deployments' sync-tag cells emptied), the third by its
+    deployment's sync-tag cell (it stays a sync tag)."""
+    folder = tmp_path_factory.mktemp("reference")
+    sim = simulate_study(n_receivers=9, n_tags=0, days=0.25, redeployed=0, seed=4)
+    files = sim.write(folder / "in", "vue")
+    deployments = sim.deployments.copy()
+    refs = deployments["transmitter"].iloc[list(AT)].tolist()
+    deployments.loc[list(AT[:2]), "transmitter"] = ""
+    deployments.to_csv(files["deployments"], index=False, float_format="%.10f")
+    lat, lon = sim.frame.to_latlon(sim.positions[AT[:1], 0], sim.positions[AT[:1], 1])
+    sheet = sim.sheet.copy()
+    sheet.loc[sheet["transmitter"].isin(refs), "role"] = "reference"
+    sheet["lat"], sheet["lon"], sheet["survey_sigma_m"], sheet["receiver"] = "", "", "", ""
+    first = sheet.index[sheet["transmitter"] == refs[0]][0]
+    sheet.loc[first, ["lat", "lon", "survey_sigma_m"]] = [f"{lat[0]:.10f}", f"{lon[0]:.10f}", f"{SURVEY:g}"]
+    sheet.loc[sheet["transmitter"] == refs[1], "receiver"] = deployments.loc[AT[1], "station"]
+    sheet.to_csv(files["tags"], index=False)
+    outcome = run_study(files["detections"], files["deployments"], files["tags"], workdir=folder / "out",
+                        chosen=refs, workers=1)
+    write_study(outcome, folder / "out")
+    return sim, refs, outcome, folder / "out"
+
+
+def _read(out, name: str) -> pd.DataFrame:
+    return pd.read_csv(out / name, dtype={"tag": str, "receiver": str})
+
+
+def test_each_reference_tag_is_scored_against_its_known_position(study):
+    sim, refs, outcome, out = study
+    scored = _read(out, "reference_tags.csv")
+    tracks = _read(out, "tracks.csv")
+    tags = _read(out, "tags.csv").set_index("tag")
+    rows = scored[scored["kind"] == "reference"].set_index("tag")
+    assert sorted(rows.index) == sorted(refs)
+    for k, tag in enumerate(refs):
+        truth = sim.positions[AT[k]]
+        mine = tracks[tracks["tag"] == tag]
+        place = mine[["x", "y"]].to_numpy(float)[0]  # a still tag: one place on every row
+        still = json.loads((out / tags.loc[tag, "folder"] / "summary.json").read_text())["motion"]["still"]
+        survey = SURVEY if k == 0 else 0.0
+        P = np.asarray(still["covariance"], float)[:2, :2] + survey**2 * np.eye(2)
+        e = place - truth
+        row = rows.loc[tag]
+        assert row["truth_x_m"] == pytest.approx(truth[0], abs=1e-3)  # lat, lon back in the frame to a mm
+        assert row["truth_y_m"] == pytest.approx(truth[1], abs=1e-3)
+        assert row["error_m"] == pytest.approx(np.hypot(*e), abs=1e-3)
+        assert row["nees"] == pytest.approx(e @ np.linalg.solve(P, e), rel=1e-3, abs=1e-6)
+        assert row["sigma_m"] == pytest.approx(np.sqrt(np.trace(P)), rel=1e-6)
+        flagged = int((mine["quality"] == "flagged").sum())
+        assert (row["rows"], row["flagged"]) == (len(mine), flagged)
+        est = pd.read_csv(out / tags.loc[tag, "folder"] / "estimates.csv")
+        fixes = est.loc[est["estimator"] == "fix", ["x", "y"]].dropna().to_numpy(float)
+        assert row["single_fix_median_error_m"] == pytest.approx(np.median(np.linalg.norm(fixes - truth, axis=1)),
+                                                                 abs=1e-3)
+        assert row["error_m"] < 1.0 and row["nees"] < beyond()  # the simulated tag is where its truth says
+    assert rows.loc[refs[0], "truth"] == "the tag sheet's lat, lon"
+    assert rows.loc[refs[0], "survey_sigma_m"] == SURVEY
+    assert "receiver" in rows.loc[refs[1], "truth"] and "sync-tag cell" in rows.loc[refs[2], "truth"]
+    # the third is still a sync tag: the clocks were fitted with its arrivals, said
+    assert list(rows.loc[refs, "in_sync"]) == [False, False, True]
+
+
+def test_the_pooled_figures_and_the_console_line(study):
+    sim, refs, outcome, out = study
+    scored = _read(out, "reference_tags.csv")
+    rows = scored[scored["kind"] == "reference"]
+    pooled = json.loads((out / "study.json").read_text())["reference_tags"]["reference"]
+    assert pooled["tags"] == 3
+    assert pooled["median_error_m"] == pytest.approx(np.median(rows["error_m"]))
+    assert pooled["nees_mean"] == pytest.approx(np.mean(rows["nees"]))
+    assert pooled["flagged"] == rows["flagged"].sum() and pooled["rows"] == rows["rows"].sum()
+    lines = [line for line, _ in reference_lines(outcome.summary["reference_tags"])]
+    said = [line for line in lines if line.startswith("  reference tags: ")]
+    assert said == [said[0]] and f"median error {np.median(rows['error_m']):.2g} m" in said[0]
+    assert f"NEES {np.mean(rows['nees']):.2g}" in said[0]
+
+
+def test_the_sync_tags_left_out_are_the_synchronisations_own(study):
+    """The sync tags' leave-one-out taken from the synchronisation's sync_tags.csv as it is, pooled as it pools it."""
+    sim, refs, outcome, out = study
+    loo = _read(out, "sync/sync_tags.csv").set_index("tag")
+    scored = _read(out, "reference_tags.csv")
+    rows = scored[scored["kind"] == "sync_left_out"].set_index("tag")
+    assert len(loo) and sorted(rows.index) == sorted(loo.index)
+    assert refs[0] not in rows.index and refs[1] not in rows.index  # no longer sync tags
+    assert np.allclose(rows.loc[loo.index, "error_m"], loo["median_error_m"])
+    assert np.allclose(rows.loc[loo.index, "nees"], loo["nees_mean"])
+    assert (rows.loc[loo.index, "flagged"] == loo["emissions"] - loo["fixes"]).all()
+    pooled = outcome.summary["reference_tags"]["sync_left_out"]
+    assert pooled["median_error_m"] == pytest.approx(loo["median_error_m"].median())
+    inside = loo.loc[loo["inside_array"], "nees_mean"]
+    assert pooled["nees_mean_inside"] == pytest.approx(inside.mean() if len(inside) else None)
+
+
+def test_a_given_synchronisations_sync_tags_are_read_as_hostile_cells(study, tmp_path):
+    """``--sync DIR``: its folder's sync_tags.csv read back (each cell checked) gives the same rows."""
+    sim, refs, outcome, out = study
+    loo = _read(out, "sync/sync_tags.csv")
+    given = given_sync_tags(out / "sync")
+    assert given["tag"].tolist() == loo["tag"].tolist()
+    assert np.allclose(given["nees_mean"], loo["nees_mean"]) and (given["inside_array"] == loo["inside_array"]).all()
+    assert pd.DataFrame(sync_rows(given))["error_m"].tolist() == pytest.approx(loo["median_error_m"].tolist())
+    assert given_sync_tags(tmp_path) is None  # a folder without one: none
+    loo["nees_mean"] = loo["nees_mean"].astype(object)
+    loo.loc[0, "nees_mean"] = "-3"
+    loo.to_csv(tmp_path / "sync_tags.csv", index=False)
+    with pytest.raises(ModelError, match="line 2 column nees_mean: '-3' is not allowed"):
+        given_sync_tags(tmp_path)
+
+
+def test_a_reference_tag_far_from_its_position_is_said(study):
+    """The same track scored against a position 30 m off: beyond its σ, and a warning says it."""
+    sim, refs, outcome, out = study
+    folder = outcome.tags.set_index("tag").loc[refs[1], "folder"]
+    truth = {"truth": "the tag sheet's lat, lon", "receiver": "", "xyz": np.r_[sim.positions[AT[1]] + [30.0, 0.0],
+                                                                              np.nan],
+             "lat": np.nan, "lon": np.nan, "survey": float("nan"), "in_sync": False}
+    row = score_reference(refs[1], outcome.outcomes[folder], truth)
+    place = np.asarray(outcome.outcomes[folder].summary["motion"]["still"]["place"])[:2]
+    assert row["error_m"] == pytest.approx(np.linalg.norm(place - sim.positions[AT[1]] - [30.0, 0.0]))
+    assert row["nees"] > beyond() and row["beyond_sigma"]
+    scored = outcome.summary["reference_tags"] | {"tags": [row]}
+    warnings = [line for line, warning in reference_lines(scored) if warning]
+    assert len(warnings) == 1 and f"reference tag {refs[1]} is {row['error_m']:.3g} m from" in warnings[0]
+
+
+def test_a_reference_tag_tracked_as_moving_is_scored_row_by_row():
+    """A track's rows not flagged: the median of their errors, the mean of their NEES on sigma_x, sigma_y."""
+    track = pd.DataFrame({"x": [1.0, 2.0, -1.0, 50.0], "y": [0.0, 1.0, 0.5, 50.0], "sigma_x": [1.0, 2.0, 1.0, 1.0],
+                          "sigma_y": [1.0, 1.0, 0.5, 1.0], "quality": ["ok", "ok", "ok", "flagged"]})
+    outcome = SimpleNamespace(track=track, summary={"motion": {"model": "random walk"}},
+                              estimates=pd.DataFrame({"estimator": ["fix"], "x": [3.0], "y": [4.0]}))
+    truth = {"truth": "t", "receiver": "", "xyz": np.array([0.0, 0.0, np.nan]), "lat": 0.0, "lon": 0.0,
+             "survey": 1.0, "in_sync": False}
+    row = score_reference("A", outcome, truth)
+    ok = track.iloc[:3]
+    d = ok[["x", "y"]].to_numpy()
+    var = ok[["sigma_x", "sigma_y"]].to_numpy() ** 2 + 1.0
+    assert row["error_m"] == pytest.approx(np.median(np.hypot(d[:, 0], d[:, 1])))
+    assert row["nees"] == pytest.approx(np.mean((d**2 / var).sum(axis=1)))
+    assert (row["rows"], row["flagged"], row["single_fix_median_error_m"]) == (4, 1, 5.0)
+
+
+def test_the_sheets_surveyed_position_is_read_as_a_hostile_cell(tmp_path):
+    sheet = tmp_path / "tags.csv"
+    sheet.write_text("transmitter,role,lat,lon,depth_m,survey_sigma_m,station\n1,reference,60.5,5.25,3,0.4,\n"
+                     "2,reference,NA,NA,,,ST01\n")
+    first, second = read_tag_sheet(sheet).tags
+    assert (first.lat, first.lon, first.depth, first.survey_sigma, first.receiver) == (60.5, 5.25, 3.0, 0.4, "")
+    assert np.isnan(second.lat) and second.receiver == "ST01"
+    for body, said in (("1,reference,60.5,,,,\n", "line 2: a surveyed position needs both lat and lon"),
+                       ("1,reference,95,5,,,\n", "line 2 column lat: '95' is not allowed"),
+                       ("1,reference,60,5,,-1,\n", "line 2 column survey_sigma_m: '-1' is not allowed")):
+        sheet.write_text("transmitter,role,lat,lon,depth_m,survey_sigma_m,station\n" + body)
+        with pytest.raises(ModelError, match=said):
+            read_tag_sheet(sheet)
