@@ -14,11 +14,16 @@ import os
 import sys
 from importlib.metadata import PackageNotFoundError, version
 
-from sblsim.models.errors import SblsimError
-from sblsim.orchestrator.commands import COMMANDS
-from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, print_notes
-from sblsim.orchestrator.cosim.config import collected_notes
-from sblsim.orchestrator.io.stop import ending, exit_status, is_stop, stop_on
+from sblsim.orchestrator.io.stop import ending, exit_status, is_stop, stop_on, workers_ignore_ctrl_c
+
+# a worker process a command spawns imports this module first: it ignores Ctrl-C (its command stops it) before the
+# seconds of imports below, in which a Ctrl-C at the terminal would end it with a traceback of its own
+workers_ignore_ctrl_c()
+
+from sblsim.models.errors import SblsimError  # noqa: E402
+from sblsim.orchestrator.commands import COMMANDS  # noqa: E402
+from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, print_notes  # noqa: E402
+from sblsim.orchestrator.cosim.config import collected_notes  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):

@@ -8,6 +8,7 @@ import logging
 import multiprocessing
 import os
 import re
+import signal
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Iterator
@@ -18,6 +19,7 @@ from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
 from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.campaign.worker import run_chunk, watch_parent
+from sblsim.orchestrator.io import stop
 
 #: ``--scheduler`` value that starts a Dask ``LocalCluster`` on this machine.
 LOCAL_CLUSTER = "local"
@@ -112,9 +114,16 @@ def connect(scheduler: str, timeout: float = CONNECT_TIMEOUT, workers: int | Non
     except ImportError:  # pragma: no cover - dask[distributed] is a dependency
         raise CampaignError("--scheduler: dask.distributed is not installed") from None
     if scheduler == LOCAL_CLUSTER:
-        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster, set_as_default=False)
+        cluster = None
+        try:
+            with stop.deferred():  # a stop waits for the cluster to be up (a half-started one fails its close at exit)
+                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                       dashboard_address=None, silence_logs=logging.ERROR)  # a stop's tasks unsaid
+            client = Client(cluster, set_as_default=False)
+        except BaseException:
+            if cluster is not None:
+                cluster.close()
+            raise
         client.cluster_owned = cluster  # closed with the client (close_client)
         return client
     probe(scheduler, timeout)
@@ -128,9 +137,17 @@ def connect(scheduler: str, timeout: float = CONNECT_TIMEOUT, workers: int | Non
 
 
 def close_client(client) -> None:
-    """Close a Dask client, and the LocalCluster it started."""
-    client.close()
+    """Close a Dask client, and the LocalCluster it started (stopped by a signal: its worker processes killed first,
+    their chunks dropped for ``--resume`` to recompute, instead of Dask's nanny waiting 4 s for a chunk's compiled
+    code before it kills them)."""
     cluster = getattr(client, "cluster_owned", None)
+    if cluster is not None and stop.pending() is not None:
+        for nanny in list(getattr(cluster, "workers", {}).values()):
+            pid = getattr(nanny, "pid", None)
+            if pid:
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
+    client.close()
     if cluster is not None:
         cluster.close()
 
@@ -177,14 +194,16 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
                                    mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
                                    initargs=(os.getpid(),))
     pending: dict = {}
+    ended = False
     try:
         pending = {pool.submit(run_chunk, c, study, engine, fmu_dir, timeseries): c for c in chunks}
         while pending:
             finished, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:
                 yield pending.pop(future), future.result()
+        ended = True
     finally:
-        if pending:  # interrupted or failed: stop the chunks under way too (their results would be dropped)
+        if not ended:  # interrupted (while submitting too) or failed: stop the chunks under way (results dropped)
             stop_pool(pool)
         else:
             pool.shutdown(wait=False, cancel_futures=True)

@@ -401,8 +401,8 @@ def _parquet_chunks(path: Path, what: str, chunk_bytes: int) -> Iterator[TextTab
 
 
 def table_length(path: Path, what: str) -> int:
-    """The most rows a table holds [1], counted before it is read: a CSV file's lines (a pass over its bytes,
-    :data:`_BLOCK` at a time), a Parquet file's rows (its metadata).
+    """The most rows a table holds [1], counted before it is read: a CSV file's lines (:func:`line_count`), a
+    Parquet file's rows (its metadata).
 
     Raises
     ------
@@ -410,24 +410,38 @@ def table_length(path: Path, what: str) -> int:
         A missing or unreadable file, one that is not a regular file, a suffix other than .csv or .parquet.
     """
     path = Path(path)
-    name = str(path)
     check_suffix(path, what)
+    if path.suffix.lower() != ".parquet":
+        return line_count(path, what)
     regular_file(path, what)
     try:
-        if path.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
+        import pyarrow.parquet as pq
 
-            return int(pq.ParquetFile(path).metadata.num_rows)
-        lines, last = 0, b"\n"
+        return int(pq.ParquetFile(path).metadata.num_rows)
+    except Exception as exc:  # pyarrow's errors on a damaged file
+        raise unreadable_parquet(str(path), what, exc) from None
+
+
+def line_count(path: Path, what: str) -> int:
+    """The lines of a regular file [1] (its line ends, and a last line without one), counted in a pass over its
+    bytes, :data:`_BLOCK` at a time, before it is read.
+
+    Raises
+    ------
+    ModelError
+        A missing or unreadable file, one that is not a regular file.
+    """
+    path = Path(path)
+    regular_file(path, what)
+    lines, last = 0, b"\n"
+    try:
         with open(path, "rb") as handle:
             while block := handle.read(_BLOCK):
                 lines += block.count(b"\n")
                 last = block[-1:]
-        return lines + (last != b"\n")
     except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-    except Exception as exc:  # pyarrow's errors on a damaged file
-        raise unreadable_parquet(name, what, exc) from None
+        raise ModelError(f"{what}: {str(path)!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    return lines + (last != b"\n")
 
 
 def check_fits(path: Path, what: str, rows: int, row_bytes: float, available: float) -> None:
@@ -447,5 +461,5 @@ def check_fits(path: Path, what: str, rows: int, row_bytes: float, available: fl
 
 
 __all__ = ["CHUNK_BYTES", "CONFIG_PREFIX", "META_CONFIG", "META_TITLE", "SUFFIXES", "TableHead", "TextTable", "cell",
-           "check_fits", "check_suffix", "columns", "line_chunks", "no_header", "parquet_rows", "read_parquet",
-           "read_table", "table_chunks", "table_length", "table_rows", "unreadable_parquet"]
+           "check_fits", "check_suffix", "columns", "line_chunks", "line_count", "no_header", "parquet_rows",
+           "read_parquet", "read_table", "table_chunks", "table_length", "table_rows", "unreadable_parquet"]

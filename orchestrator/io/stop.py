@@ -12,12 +12,16 @@ error (:func:`is_stop`). The command then ends with one line and :func:`exit_sta
 SIGINT, 143 for SIGTERM, 129 for SIGHUP).
 
 A signal a parent process set to be ignored (``nohup``'s SIGHUP, a background job's SIGINT) stays ignored. The
-Python API installs no handler: its callers' own handling of signals is theirs.
+Python API installs no handler: its callers' own handling of signals is theirs. A worker process a command starts
+(a pool's, a Dask cluster's) ignores Ctrl-C (:func:`workers_ignore_ctrl_c`): a terminal sends it to the whole
+process group, and the command stops its workers itself.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 from typing import Iterator
@@ -87,6 +91,34 @@ def ending() -> Iterator[None]:
         _RAISING[0] = raising
 
 
+def workers_ignore_ctrl_c() -> None:
+    """In a worker process a command started (spawned: it imports the command line's module before its work),
+    ignore SIGINT: Ctrl-C at a terminal reaches every process of the group, the command stops its workers (a pool
+    terminated, a cluster closed) and a worker that took it itself would print its own traceback. Nothing in the
+    command's own process."""
+    spawned = "--multiprocessing-fork" in sys.argv  # its command line while it imports (before its parent is known)
+    worker = spawned or multiprocessing.parent_process() is not None
+    if worker and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """The stop's signals held back (blocked, not lost) while the body runs, delivered when it ends: for work that a
+    stop must not cut in two (a Dask cluster's start, whose half-started workers would fail its close at exit). The
+    processes the body starts inherit them blocked: Ctrl-C at a terminal is their command's to handle. The main
+    thread only, where a platform blocks signals (POSIX)."""
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = {getattr(signal, name) for name in SIGNALS if hasattr(signal, name)}
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 @contextmanager
 def stop_on() -> Iterator[None]:
     """Handle :data:`SIGNALS` as stops while the body runs (the main thread only: signals are handled there),
@@ -108,5 +140,5 @@ def stop_on() -> Iterator[None]:
         _RECEIVED.clear()
 
 
-__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "check", "ending", "exit_status", "is_stop",
-           "pending", "stop_on"]
+__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "check", "deferred", "ending", "exit_status",
+           "is_stop", "pending", "stop_on", "workers_ignore_ctrl_c"]

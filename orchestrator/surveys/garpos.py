@@ -44,9 +44,10 @@ from sblsim.models.acoustics.sound_speed import fit_rows
 from sblsim.models.calibration import SOUND_SPEED_RANGE
 from sblsim.models.calibration.boxin import lever_enu
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.log_tables import columns, read_table
+from sblsim.orchestrator.cosim.limits import MEMORY_SHARE, available_memory
+from sblsim.orchestrator.io.log_tables import check_fits, columns, read_table, table_chunks, table_length
 from sblsim.orchestrator.io.tables import number, read_lines
-from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, TRANSPONDER_ID, SurveyLog, check_frame
+from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, ROW_BYTES, TRANSPONDER_ID, SurveyLog, check_frame
 from sblsim.orchestrator.surveys.seagap import HEADING_RANGE, NOMINAL_SIGMA_M, OFFSET_RANGE, TILT_RANGE
 
 #: The observation CSV's columns read (by name): name -> allowed range (None: text).
@@ -186,33 +187,41 @@ def read_garpos(obs: Path | str, initcfg: Path | str, svp: Path | str) -> Garpos
     origin, stations, apriori, offset, name, midnight = read_initcfg(initcfg)
     profile = read_svp(svp)
     obs = Path(obs)
-    table = read_table(obs, "obs")
-    index = columns(table, "obs")
-    missing = [c for c in OBS_COLUMNS if c not in index]
-    if missing:
-        raise ModelError(f"obs: {str(obs)!r} lacks the column{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
-    data, where, flagged, unknown = [], [], 0, 0
+    check_fits(obs, "obs", table_length(obs, "obs"), ROW_BYTES, MEMORY_SHARE * available_memory())
+    parts, where, flagged, unknown = [], [], 0, 0
     known = set(stations)
-    for place, cells in table.rows:
-        here = f"obs: {str(obs)!r} {place}"
-        flag = cells[index["flag"]].strip()
-        if flag not in ("True", "False"):
-            raise ModelError(f"{here}: flag: {flag[:40]!r} is not True or False")
-        mt = cells[index["MT"]].strip()
-        if not TRANSPONDER_ID.fullmatch(mt):
-            raise ModelError(f"{here}: MT: {mt[:40]!r} is not an id (1-32 letters, digits, _, - or .)")
-        values = {c: number(cells[index[c]], here, c, *b) for c, b in OBS_COLUMNS.items() if b is not None}
-        if flag == "True":
-            flagged += 1
-            continue
-        if mt not in known:
-            unknown += 1
-            continue
-        data.append({"MT": mt, **values})
-        where.append(place)
-    if not data:
+    header: list[str] = []
+    for table in table_chunks(obs, "obs"):  # in pieces: an observation file of any length in bounded memory
+        if not header:
+            header, index = table.header, columns(table, "obs")
+            missing = [c for c in OBS_COLUMNS if c not in index]
+            if missing:
+                raise ModelError(f"obs: {str(obs)!r} lacks the column{'s' if len(missing) > 1 else ''} "
+                                 f"{', '.join(missing)}")
+        data = []
+        for place, cells in table.rows:
+            here = f"obs: {str(obs)!r} {place}"
+            flag = cells[index["flag"]].strip()
+            if flag not in ("True", "False"):
+                raise ModelError(f"{here}: flag: {flag[:40]!r} is not True or False")
+            mt = cells[index["MT"]].strip()
+            if not TRANSPONDER_ID.fullmatch(mt):
+                raise ModelError(f"{here}: MT: {mt[:40]!r} is not an id (1-32 letters, digits, _, - or .)")
+            values = {c: number(cells[index[c]], here, c, *b) for c, b in OBS_COLUMNS.items() if b is not None}
+            if flag == "True":
+                flagged += 1
+                continue
+            if mt not in known:
+                unknown += 1
+                continue
+            data.append({"MT": mt, **values})
+            where.append(place)
+        if data:
+            parts.append(pd.DataFrame(data))
+    if not where:
         raise ModelError(f"obs: {str(obs)!r} holds no reply of the stations {', '.join(stations)} that is not flagged")
-    f = pd.DataFrame(data)
+    f = pd.concat(parts, ignore_index=True)
+    del parts
     points = {}
     for w, prefix in (("0", "tx"), ("1", "rx")):
         antenna = f[[f"ant_e{w}", f"ant_n{w}", f"ant_u{w}"]].to_numpy()
@@ -226,7 +235,7 @@ def read_garpos(obs: Path | str, initcfg: Path | str, svp: Path | str) -> Garpos
             frame[f"{prefix}_{axis}_m"] = p[:, j]
             frame[f"{prefix}_sigma_{axis}_m"] = NOMINAL_SIGMA_M
     log = check_frame(frame[list(LOG_COLUMNS)], where, str(obs))
-    log.counts["ignored_columns"] = [c for c in table.header if c and c not in OBS_COLUMNS]
+    log.counts["ignored_columns"] = [c for c in header if c and c not in OBS_COLUMNS]
     return GarposSurvey(log, stations, apriori, profile, origin, name, offset,
                         {"flagged": flagged, "unknown_transponder": unknown})
 

@@ -16,11 +16,14 @@ import re
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.tables import csv_cells, number, read_lines
-from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, SurveyLog, check_frame
+from sblsim.orchestrator.cosim.limits import MEMORY_SHARE, available_memory
+from sblsim.orchestrator.io.log_tables import check_fits, line_chunks, line_count
+from sblsim.orchestrator.io.tables import csv_cells, number
+from sblsim.orchestrator.surveys.log import COLUMNS, LOG_COLUMNS, ROW_BYTES, SurveyLog, check_frame
 
 #: The files' clock: seconds after this instant (UTC) [s since 1970-01-01].
 EPOCH = datetime(2020, 1, 1, tzinfo=timezone.utc).timestamp()
@@ -43,7 +46,7 @@ def origin(path: Path | str) -> tuple[float, float, float] | None:
     ModelError
         As :func:`read_xie` for a file that cannot be read.
     """
-    for line in read_lines(Path(path), "log"):
+    for _, line in next(line_chunks(Path(path), "log", delimiter=" ", comments=True), []):  # the header: first lines
         if not line.lstrip().startswith("#"):
             break
         found = _ORIGIN.search(line)
@@ -71,29 +74,31 @@ def read_xie(path: Path | str) -> SurveyLog:
     Raises
     ------
     ModelError
-        One line naming the file, the line and the field: a missing or not regular file, too large, not UTF-8, a
-        line without 15 fields, a field that is not a number or outside its range (those of
-        :data:`sblsim.orchestrator.surveys.log.COLUMNS`), no data line.
+        One line naming the file, the line and the field: a missing or not regular file, one too large for the
+        memory here (read in pieces, :func:`~sblsim.orchestrator.io.log_tables.line_chunks`), a line too long or of
+        too many fields, not UTF-8, a line without 15 fields, a field that is not a number or outside its range
+        (those of :data:`sblsim.orchestrator.surveys.log.COLUMNS`), no data line.
     """
     path = Path(path)
     what = "log"
-    rows: list[list[float]] = []
+    check_fits(path, what, line_count(path, what), ROW_BYTES, MEMORY_SHARE * available_memory())
+    parts: list[np.ndarray] = []
     where: list[str] = []
-    lines = [(k, line) for k, line in enumerate(read_lines(path, what, delimiter=" ", comments=True), start=1)
-             if line.strip() and not line.lstrip().startswith("#")]
-    for k, cells in csv_cells(lines, f"{what}: {str(path)!r}", " "):  # whitespace-separated, parsed by the csv module
-        here = f"{what}: {str(path)!r} line {k}"
-        if len(cells) != len(FIELDS):
-            raise ModelError(f"{here} has {len(cells)} fields, the format {len(FIELDS)} ({' '.join(FIELDS)})")
-        values = []
-        for name, text in zip(FIELDS, cells):
-            bounds = CLOCK_RANGE if name in ("t_tx", "t_rx") else COLUMNS[name][2]
-            values.append(number(text, here, name, *bounds))
-        rows.append(values)
-        where.append(f"line {k}")
-    if not rows:
+    for piece in line_chunks(path, what, delimiter=" ", comments=True):  # in pieces: any length, bounded memory
+        lines = [(k, line) for k, line in piece if line.strip() and not line.lstrip().startswith("#")]
+        values = np.empty((len(lines), len(FIELDS)))
+        for j, (k, cells) in enumerate(csv_cells(lines, f"{what}: {str(path)!r}", " ")):  # by the csv module
+            here = f"{what}: {str(path)!r} line {k}"
+            if len(cells) != len(FIELDS):
+                raise ModelError(f"{here} has {len(cells)} fields, the format {len(FIELDS)} ({' '.join(FIELDS)})")
+            for i, (name, text) in enumerate(zip(FIELDS, cells)):
+                bounds = CLOCK_RANGE if name in ("t_tx", "t_rx") else COLUMNS[name][2]
+                values[j, i] = number(text, here, name, *bounds)
+            where.append(f"line {k}")
+        parts.append(values)
+    if not where:
         raise ModelError(f"{what}: {str(path)!r} holds no data line")
-    raw = pd.DataFrame(rows, columns=list(FIELDS))
+    raw = pd.DataFrame(np.concatenate(parts), columns=list(FIELDS))
     frame = raw.drop(columns=["t_tx", "t_rx"]).assign(
         ping=range(len(raw)), transponder=TRANSPONDER, t_tx_s=raw["t_tx"] + EPOCH, t_rx_s=raw["t_rx"] + EPOCH)
     log = check_frame(frame[list(LOG_COLUMNS)], where, str(path))

@@ -132,20 +132,24 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
         for name, toa, receivers, options in jobs:
             done(name, track_tag(toa, receivers, options))
     else:
+        from sblsim.orchestrator.campaign.executors import stop_pool
         from sblsim.orchestrator.campaign.worker import watch_parent
 
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=watch_parent, initargs=(os.getpid(),)) as pool:
-            pending = {pool.submit(track_tag, toa, receivers, options): name
-                       for name, toa, receivers, options in jobs}
-            try:
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        done(pending.pop(future), future.result())
-            finally:
-                for future in pending:
-                    future.cancel()
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=watch_parent, initargs=(os.getpid(),))
+        ended = False
+        try:
+            pending = {pool.submit(track_tag, toa, receivers, options): name for name, toa, receivers, options in jobs}
+            while pending:
+                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    done(pending.pop(future), future.result())
+            ended = True
+        finally:
+            if not ended:  # stopped (while submitting too) or failed: the tags under way stopped, not awaited
+                stop_pool(pool)
+            else:
+                pool.shutdown()
     return results
 
 

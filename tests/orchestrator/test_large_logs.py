@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import io
 import json
 import subprocess
 import sys
@@ -30,6 +31,9 @@ from sblsim.orchestrator.io import log_tables, tables
 from sblsim.orchestrator.logs import receiver_log, truth_track
 from sblsim.orchestrator.surveys import log as survey_log
 from sblsim.orchestrator.surveys.simulate import load_simulated, replicate
+
+#: Survey A's file of 2021-07-23 (the package's data).
+XIE_FILE = Path(survey_log.__file__).parent / "data" / "xie" / "gnssa_data_20210723.txt"
 
 
 def _pieces(monkeypatch, module, size: int) -> None:
@@ -280,3 +284,36 @@ def test_a_log_of_a_million_replies_is_read_and_solved_in_under_1_gib(tmp_path):
         assert abs(at_whole - at_half) <= 3 * apart, (axis, at_whole, at_half, apart)
         assert abs(at_whole - truth["enu".index(axis)]) <= 3 * b[f"sigma_{axis}_m"], (axis, at_whole)
     print(f"half: {t_half:.0f} s; whole: {t_whole:.0f} s, peak {peak / 2**20:.0f} MiB", file=sys.stderr)
+
+
+def test_survey_a_and_a_garpos_survey_read_in_pieces_are_read_whole(tmp_path, monkeypatch):
+    """Survey A's text file in pieces of 300 bytes (a line or two) against numpy's reading of it; a GARPOS observation
+    file in pieces of 500 bytes against the reader in one piece (its rows flagged, of other stations, spanning the
+    pieces: every piece's count kept)."""
+    from sblsim.orchestrator.surveys import garpos, xie
+    from tests.orchestrator.test_calibrate_garpos import _write
+
+    text = XIE_FILE.read_text()
+    numbers = np.loadtxt(io.StringIO(text), comments="#")
+    monkeypatch.setattr(xie, "line_chunks", functools.partial(log_tables.line_chunks, chunk_bytes=300))
+    log = xie.read_xie(XIE_FILE)
+    assert len(log.frame) == len(numbers)
+    np.testing.assert_array_equal(log.frame["twtt_s"].to_numpy(), numbers[:, 14])
+    np.testing.assert_array_equal(log.frame["tx_n_m"].to_numpy(), numbers[:, 1])
+    _write(tmp_path / "g")
+    obs = tmp_path / "g" / "obs.csv"
+    lines = obs.read_text().splitlines()
+    for k in range(3, len(lines), 7):  # every 7th reply flagged, every 11th of a station the site does not have
+        lines[k] = lines[k].replace(",False,", ",True,")
+    for k in range(5, len(lines), 11):
+        cells = lines[k].split(",")
+        lines[k] = ",".join(cells[:3] + ["Z9"] + cells[4:])
+    obs.write_text("\n".join(lines) + "\n")
+    files = obs, tmp_path / "g" / "initcfg.ini", tmp_path / "g" / "svp.csv"
+    whole = garpos.read_garpos(*files)
+    _pieces(monkeypatch, garpos, 500)
+    pieces = garpos.read_garpos(*files)
+    pd.testing.assert_frame_equal(pieces.log.frame, whole.log.frame)
+    assert pieces.log.where == whole.log.where and pieces.left_out == whole.left_out
+    assert whole.left_out == {"flagged": len(range(3, len(lines), 7)), "unknown_transponder": len(
+        [k for k in range(5, len(lines), 11) if ",True," not in lines[k]])}
