@@ -24,6 +24,7 @@ from sblsim.orchestrator.readers.in_water import SAID
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry import reference_tags as references
+from sblsim.orchestrator.telemetry.report.page import study_report
 from sblsim.orchestrator.telemetry.study import StudyOutcome
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
@@ -283,6 +284,7 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
         fig.savefig(folder / "map.png", dpi=110)
     finally:
         plt.close(fig)
+    study_report(outcome, folder)  # report.html (and detections_daily.csv): from the files above
 
 
 __all__ = ["geojson", "study_map", "write_study"]
