@@ -158,8 +158,8 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         detections show.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
-        ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``sync/``, ``tags/``: a folder per tag), all or
-        nothing.
+        ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
+        ``sync/``, ``tags/``: a folder per tag), all or nothing.
     force : bool
         Replace an earlier study in ``out``.
     progress : bool, str or callable
@@ -286,7 +286,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"note: {note}", file=sys.stderr)
     print(closing_line(outcome.tags, outcome.summary["wall_time_s"], out,
                        f"tracks.csv, tags.csv, receivers.csv, reference_tags.csv, study.json, "
-                       f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, "
+                       f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, report.html, "
                        f"{'sync/, ' if outcome.sync is not None else ''}tags/: a folder per tag"))
     return 0
 
