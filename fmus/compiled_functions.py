@@ -15,6 +15,7 @@ from sblsim.fmus.native import NO_MODELS, library_path, load
 from sblsim.models.acoustics.detection import family_levels
 from sblsim.models.acoustics.ray_tables import exact_points, family_points
 from sblsim.models.errors import CompileError
+from sblsim.models.interrupts import pending
 
 
 def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
@@ -23,6 +24,8 @@ def compiled_exact_points(n_beacons: int = 4) -> ca.Function | None:
     try:
         return ca.external(exact_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
+        if pending() is not None:  # a signal's exception lost in casadi's symbolic work: the stop, not a failure
+            raise
         return None
 
 
@@ -32,6 +35,8 @@ def compiled_family_points(n_beacons: int = 4) -> ca.Function | None:
     try:
         return ca.external(family_points().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
+        if pending() is not None:  # a signal's exception lost in casadi's symbolic work: the stop, not a failure
+            raise
         return None
 
 
@@ -41,6 +46,8 @@ def compiled_family_levels(n_beacons: int = 4) -> ca.Function | None:
     try:
         return ca.external(family_levels().name(), str(library_path(n_beacons, models=NO_MODELS)))
     except (CompileError, OSError, RuntimeError):
+        if pending() is not None:  # a signal's exception lost in casadi's symbolic work: the stop, not a failure
+            raise
         return None
 
 

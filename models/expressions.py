@@ -13,6 +13,8 @@ from typing import Any, Callable, Sequence
 import casadi as ca
 import numpy as np
 
+from sblsim.models.interrupts import check
+
 #: An index past every row: :func:`put_row` at it writes nothing.
 NO_ROW = 1e9
 
@@ -176,7 +178,8 @@ def map_in_chunks(function: ca.Function, columns: Sequence[Any], shared: Sequenc
 
     A map over many points (a site's eigenrays over a grid of a million points) is minutes of compiled code in
     one call, during which Python handles no signal: a user's Ctrl-C or SIGTERM would wait for its end. Cut into
-    chunks, the signal is handled between two of them. The chunk's width is adapted to the time the last one
+    chunks, the signal is handled between two of them (and a stop whose exception a call lost is checked there:
+    :func:`sblsim.models.interrupts.check`). The chunk's width is adapted to the time the last one
     took (a power of two, from 16 columns); each column is evaluated alone, so the numbers are those of one map.
 
     Parameters
@@ -205,6 +208,7 @@ def map_in_chunks(function: ca.Function, columns: Sequence[Any], shared: Sequenc
         mapped = maps.get(k) or maps.setdefault(k, function.map(k))
         began = time.perf_counter()
         out = mapped(*(c[None, start:start + k] for c in columns), *shared)
+        check()  # a stop whose exception the call lost: the next piece not begun
         took = time.perf_counter() - began
         parts.append([np.asarray(o).reshape(-1, k) for o in (out if isinstance(out, (list, tuple)) else [out])])
         start += k

@@ -26,6 +26,8 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
+from sblsim.models import interrupts
+
 #: The signals that stop a command, by name (those the platform has).
 SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 #: A command's exit status when a signal stopped it is this plus the signal's number (POSIX shells' rule).
@@ -33,10 +35,9 @@ SIGNAL_STATUS_BASE = 128
 #: The exit status of a stop without a recorded signal (a KeyboardInterrupt raised otherwise): Ctrl-C's.
 EXIT_INTERRUPTED = SIGNAL_STATUS_BASE + int(signal.SIGINT)
 
-#: The signals received since :func:`stop_on` began, in order (empty: no stop is pending).
-_RECEIVED: list[int] = []
-#: Whether the handler raises (False while a command that is stopping finishes its last lines).
-_RAISING = [True]
+#: The signals received since :func:`stop_on` began and whether the handler raises (False while a command that is
+#: stopping finishes its last lines): kept where the lowest layers see them (:mod:`sblsim.models.interrupts`).
+_RECEIVED, _RAISING = interrupts.RECEIVED, interrupts.RAISING
 
 
 def _handler(signum: int, frame) -> None:
@@ -46,16 +47,9 @@ def _handler(signum: int, frame) -> None:
         raise KeyboardInterrupt
 
 
-def pending() -> int | None:
-    """The signal of the pending stop (the first received), or None."""
-    return _RECEIVED[0] if _RECEIVED else None
-
-
-def check() -> None:
-    """Raise :class:`KeyboardInterrupt` when a stop is pending (a long loop's check at its natural step: its
-    exception was lost in a compiled library's call, or the signal came between two of its steps)."""
-    if _RECEIVED and _RAISING[0]:
-        raise KeyboardInterrupt
+#: The signal of the pending stop, or None; raise KeyboardInterrupt when one is pending (a long loop's check at its
+#: natural step: its exception was lost in a compiled library's call, or the signal came between two of its steps).
+pending, check = interrupts.pending, interrupts.check
 
 
 def is_stop(exc: BaseException) -> bool:

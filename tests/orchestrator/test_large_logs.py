@@ -229,6 +229,29 @@ def test_a_log_the_memory_here_cannot_hold_is_refused_before_it_is_read(tmp_path
     assert f"holds up to {survey.read_text().count(chr(10)):,} rows" in _refusal(survey_log.read_survey_log, survey)
 
 
+@pytest.mark.slow
+def test_a_line_of_200_million_commas_is_refused_in_bounded_memory(tmp_path):
+    """The hostile shape the bounds exist for, after a genuine header and reply: refused by the command in one line
+    with its exact count, its line scanned, never held (the command's peak memory below 0.5 GiB: the file is 200 MB),
+    nothing written."""
+    good = _simulated_log(tmp_path).read_text().splitlines()
+    path = tmp_path / "commas.csv"
+    with open(path, "w") as handle:
+        handle.write("\n".join(good[:3]) + "\n")
+        for _ in range(200):
+            handle.write("," * 1_000_000)
+        handle.write("\n")
+    code = ("import resource, sys\nfrom sblsim.orchestrator.cli import main\nstatus = main(sys.argv[1:])\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\nsys.exit(status)\n")
+    proc = subprocess.run([sys.executable, "-c", code, "calibrate", str(path), "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=600)
+    *lines, peak = proc.stderr.splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr[-2000:]
+    assert f"line 4 holds {200_000_001:,} cells; allowed at most {tables.MAX_LINE_CELLS:,} cells a line" in lines[0]
+    assert int(peak) * 1024 < 2**29, peak
+    assert not (tmp_path / "o").exists()
+
+
 # --------------------------------------------------------------------------- a million replies
 
 #: What the command runs with beside the defaults: the solver's one-at-a-time outlier rejection re-solves the whole

@@ -260,7 +260,7 @@ LONG = {
     "budget": (["budget", "lbl-field"], "lock", (1.0, 8.0), False),
     "map": (["map", "usbl-deep", "--extent", "2000", "--step", "10"], "lock", (0.2, 6.0), False),
     "design": (["design", "lbl-field-2km"], "lock", (1.0, 6.0), False),
-    "design workers": (["design", "lbl-field-2km", "--workers", "2"], "lock", (2.0,), True),
+    "design workers": (["design", "lbl-field-2km", "--workers", "2"], "lock", (2.0, 6.0), True),
     "campaign workers": (["campaign", "paper", "--workers", "2"], "campaign:", (0.0, 4.0), True),
     # a stop in a local Dask cluster's first seconds of work waits for its nannies (6-8 s measured on 2 busy cores)
     "campaign dask": (["campaign", "paper", "--scheduler", "local", "--workers", "2"], "campaign:", (3.0, 8.0), True),
@@ -344,7 +344,9 @@ def test_a_long_command_stops_cleanly_at_any_point(warm, tmp_path, name, point, 
             proc.kill()
             proc.wait()
     after = [line for at, line in lines if at >= sent]
-    assert proc.returncode == 128 + sig, (proc.returncode, lines)
+    # 130 for Ctrl-C, or ended by SIGINT itself once its one line is said (seen twice in some sixty: a SIGINT
+    # delivered again as the interpreter ends); a shell reports both as 130
+    assert proc.returncode in ((128 + sig, -sig) if sig == signal.SIGINT else (128 + sig,)), (proc.returncode, lines)
     assert took < WITHIN, (took, lines)
     assert len(after) == 1 and after[0].startswith("sblsim: interrupted"), lines
     assert not any("Traceback" in line for _, line in lines), lines
