@@ -42,7 +42,7 @@ PER_DAY = {"R1": [120, 130, 90], "R2": [40, 0, 55], "R3": [10, 12, 8], "R4": [30
 #: Each tracked tag's rows: quality and reason.
 FLAGS = {"A-1": ["ok"] * 6 + [("flagged", "unverified"), ("flagged", "placed_less_well_than_a_fix;unverified"),
                               ("flagged", "")],
-         "A-2": ["ok"] * 4 + [("flagged", "placed_less_well_than_a_fix")]}
+         "A-2": ["ok"] * 4 + [("flagged", "placed_less_well_than_a_fix"), "set_aside", "set_aside"]}
 REFUSED = {"A-3": ("one_receiver", "heard by 1 receiver (R1, 40 detections): positioning needs 3 at once"),
            "A-4": ("never_detected", "tag: 'A-4' is never detected <script>alert(1)</script> inside a deployment")}
 NOTES = ["receiver R2's clock broke at 2023-10-02T12:00:00Z: its clock split there", "the tag sheet's <b>A-9</b> is "
@@ -61,9 +61,14 @@ def _tracks() -> pd.DataFrame:
         for j, q in enumerate(qualities):
             quality, reason = q if isinstance(q, tuple) else (q, "")
             t = T0 + 3600.0 * (j + 1) + 60 * k
-            rows.append({"tag": tag, "time_utc": iso_utc([t])[0], "epoch_s": t, "lat": 55.0, "lon": 10.0,
-                         "x": 500_000.0 + 10 * j, "y": 6_100_000.0 + 5 * j, "sigma_x": 0.5 + 0.1 * j,
-                         "sigma_y": 0.4, "receivers_heard": 3 + j % 2, "quality": quality, "quality_reason": reason})
+            row = {"tag": tag, "time_utc": iso_utc([t])[0], "epoch_s": t, "lat": 55.0, "lon": 10.0,
+                   "x": 500_000.0 + 10 * j, "y": 6_100_000.0 + 5 * j, "sigma_x": 0.5 + 0.1 * j, "sigma_y": 0.4,
+                   "receivers_heard": 3 + j % 2, "quality": quality, "quality_reason": reason}
+            if q == "set_aside":  # a row set aside as no ping of the tag's schedule: kept, with no estimate
+                row |= {k: np.nan for k in ("epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y",
+                                            "receivers_heard")} | {"time_utc": "", "quality": "flagged",
+                                                                   "quality_reason": "set_aside_not_a_ping"}
+            rows.append(row)
     return pd.DataFrame(rows)
 
 
@@ -72,11 +77,13 @@ def _tags() -> pd.DataFrame:
     tracks = _tracks()
     for tag in FLAGS:
         mine = tracks[tracks["tag"] == tag]
+        aside = int((mine["quality_reason"] == "set_aside_not_a_ping").sum())
         rows.append({"tag": tag, "transmitter": tag, "name": "cod", "role": "animal", "motion": "moving",
                      "ping_type_stated": "inferred", "status": "tracked", "reason_code": "", "reason": "",
                      "detections": 40, "receivers": 3, "pings": len(mine), "pings_at_once": len(mine),
-                     "positioned": len(mine), "set_aside": 0, "not_positioned": 0, "not_positioned_why": "",
-                     "flagged": int((mine["quality"] == "flagged").sum()), "median_sigma_m": 0.7, "ping_type": "rbi",
+                     "positioned": len(mine) - aside, "set_aside": aside, "not_positioned": 0,
+                     "not_positioned_why": "", "flagged": int((mine["quality"] == "flagged").sum()) - aside,
+                     "median_sigma_m": 0.7, "ping_type": "rbi",
                      "track": "robust", "sound_speed_m_s": 1476.2,
                      "sound_speed_source": "calibrated" if tag == "A-1" else "fallback",
                      "first_utc": mine["time_utc"].iloc[0], "last_utc": mine["time_utc"].iloc[-1],
@@ -274,7 +281,12 @@ def test_the_flagged_rows_are_counted_by_each_of_their_reasons(rendered):
             if isinstance(q, tuple):
                 for reason in (q[1].split(";") if q[1] else ["(no reason given)"]):
                     expected[reason] = expected.get(reason, 0) + 1
-        assert flag_counts(study, tag) == expected
+        assert flag_counts(study, tag) == expected  # the rows set aside (no position) not among them
+    tags = pd.read_csv(rendered[0] / "tags.csv").set_index("tag")
+    assert tags.loc["A-2", "set_aside"] == 2
+    for tag in FLAGS:  # each flagged row counted once among tags.csv's flagged, whatever its reasons
+        rows = study.tracks[(study.tracks["tag"] == tag) & study.tracks["x"].notna()]
+        assert (rows["quality"] == "flagged").sum() == tags.loc[tag, "flagged"]
 
 
 def test_the_clock_offsets_less_their_trend(rendered):
@@ -406,3 +418,14 @@ def test_a_file_that_leads_out_of_the_folder_is_refused(folder, tmp_path):
     (folder / "tracks.csv").symlink_to(secret)
     with pytest.raises(ModelError, match="outside the folder"):
         write_report(folder)
+
+
+def test_the_tags_drawn_are_capped_at_those_with_the_most_rows(rendered, monkeypatch):
+    from sblsim.orchestrator.telemetry.report import context
+
+    monkeypatch.setattr(context, "MAX_TAG_FIGURES", 1)
+    text = render(rendered[1])
+    drawn = re.findall(r'alt="tag ([^ ]+)\'s track', text.replace("&#39;", "'"))
+    assert drawn == ["A-1"]  # 9 rows positioned against A-2's 5
+    section = text[text.index('id="tag-2-A-2"'):text.index('id="tag-3-A-3"')]
+    assert "Not drawn here: the page draws the 1 tags with the most rows" in section.replace("\n", " ")

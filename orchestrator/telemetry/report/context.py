@@ -33,8 +33,10 @@ TAG_TABLE = {"name": "name", "role": "role", "status": "status", "reason_code": 
 RECEIVER_TABLE = {"receiver": "receiver", "serial": "serial", "station": "station", "sync_tag": "sync tag",
                   "lat": "lat [°]", "lon": "lon [°]", "z_m": "z [m]", "start_utc": "deployed (UTC)",
                   "end_utc": "recovered (UTC)", "detections": "detections kept"}
-#: The most deployments not used listed in the page (the others counted: receivers.csv lists all).
+#: The most deployments not used listed in the page (the others counted: receivers.csv lists all), and the most
+#: tags drawn (those with the most rows positioned: about 0.3 s and 30 kB each; every tag's track.png is in its folder).
 MAX_NOT_USED = 500
+MAX_TAG_FIGURES = 200
 #: An ISO 8601 UTC time as the study's files write it (shown to the second), and the columns shown with 6 decimals.
 ISO_TIME = re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?Z")
 DEGREES = ("lat", "lon", "truth_lat", "truth_lon")
@@ -156,7 +158,7 @@ def _clocks(study: StudyFolder) -> dict[str, Any]:
             "sync_table": None if sync is None else _table(sync, columns)}
 
 
-def _tag_section(k: int, row: dict[str, Any], study: StudyFolder) -> dict[str, Any]:
+def _tag_section(k: int, row: dict[str, Any], study: StudyFolder, drawn: bool) -> dict[str, Any]:
     tag = shown(row.get("tag")) or shown(row.get("transmitter"))
     code = shown(row.get("reason_code"))
     counts = _pairs([(label, row.get(key)) for key, label in (
@@ -168,7 +170,8 @@ def _tag_section(k: int, row: dict[str, Any], study: StudyFolder) -> dict[str, A
         ("last_utc", "last row (UTC)"))])
     section = {"anchor": anchor(k, tag), "tag": tag, "name": shown(row.get("name")), "role": shown(row.get("role")),
                "status": shown(row.get("status")), "code": code, "meaning": REASON_CODES.get(code, ""),
-               "reason": shown(row.get("reason")), "counts": counts, "flags": [], "facts": [], "figure": None}
+               "reason": shown(row.get("reason")), "counts": counts, "flags": [], "facts": [], "figure": None,
+               "undrawn": False}
     if row.get("status") != "tracked":
         return section
     summary = study.tag_summaries.get(tag, {})
@@ -183,23 +186,28 @@ def _tag_section(k: int, row: dict[str, Any], study: StudyFolder) -> dict[str, A
         ("timing noise", summary_value(summary, "toa_noise", "source")),
         ("motion model", summary_value(summary, "motion", "model")), ("track", row.get("track"))])
     section["flags"] = [(reason, f"{n:,}") for reason, n in flag_counts(study, tag).items()]
-    section["figure"] = tag_figure(study, tag)
+    section["figure"] = tag_figure(study, tag) if drawn else None
+    section["undrawn"] = not drawn
     return section
 
 
 def _tags(study: StudyFolder) -> dict[str, Any]:
     tags = study.tags
     rows = tags.to_dict("records")
-    keys = [c for c in TAG_TABLE if c in tags]
+    keys = [c for c in TAG_TABLE if c in tags and any(shown(r.get(c)) for r in rows)]  # none empty in every row
     table = [{"anchor": anchor(k, shown(r.get("tag")) or shown(r.get("transmitter"))),
               "tag": shown(r.get("tag")) or shown(r.get("transmitter")),
               "cells": [shown(r.get(c)) for c in keys], "tracked": r.get("status") == "tracked"}
              for k, r in enumerate(rows)]
     codes = tags.loc[tags["status"] != "tracked", "reason_code"].astype(str).value_counts()
+    positioned = tags["positioned"].to_numpy(float) if "positioned" in tags else np.zeros(len(tags))
+    tracked = np.flatnonzero((tags["status"] == "tracked").to_numpy())
+    drawn = set(tracked[np.argsort(-np.nan_to_num(positioned[tracked]), kind="stable")][:MAX_TAG_FIGURES].tolist())
     return {"columns": [TAG_TABLE[c] for c in keys], "rows": table,
             "numeric": [c in tags and tags[c].dtype.kind == "f" for c in keys],
             "reasons": [(code, f"{n:,}", REASON_CODES.get(code, "")) for code, n in codes.items()],
-            "sections": [_tag_section(k, r, study) for k, r in enumerate(rows)]}
+            "sections": [_tag_section(k, r, study, k in drawn) for k, r in enumerate(rows)],
+            "max_figures": MAX_TAG_FIGURES}
 
 
 #: The reference tags' table's columns shown (reference_tags.csv has them all).
@@ -254,4 +262,4 @@ def page_context(study: StudyFolder) -> dict[str, Any]:
             "title": shown(summary_value(s, "detections", "file")) or study.name}
 
 
-__all__ = ["MAX_NOT_USED", "anchor", "page_context", "shown"]
+__all__ = ["MAX_NOT_USED", "MAX_TAG_FIGURES", "anchor", "page_context", "shown"]

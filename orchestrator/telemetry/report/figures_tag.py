@@ -21,10 +21,18 @@ CLIP = 0.01
 NO_REASON = "(no reason given)"
 
 
+def _positioned(tracks: pd.DataFrame, tag: str) -> pd.DataFrame:
+    """A tag's rows of ``tracks.csv`` that hold a position (a row set aside as no ping of its schedule holds
+    none: it is counted in ``tags.csv``'s ``set_aside``, not among the rows positioned or flagged)."""
+    mine = tracks[tracks["tag"].astype(str) == tag]
+    placed = np.isfinite(mine[["x", "y", "epoch_s"]].to_numpy(float)).all(axis=1)
+    return mine[placed]
+
+
 def tag_rows(study: StudyFolder, tag: str) -> pd.DataFrame:
-    """A tag's rows of ``tracks.csv`` by time, with ``sigma_m`` (the 2-D σ, ``hypot(sigma_x, sigma_y)`` [m]),
-    ``flagged`` and ``hours`` (from its first row)."""
-    rows = study.tracks[study.tracks["tag"].astype(str) == tag].sort_values("epoch_s", kind="stable")
+    """A tag's rows of ``tracks.csv`` that hold a position, by time, with ``sigma_m`` (the 2-D σ,
+    ``hypot(sigma_x, sigma_y)`` [m]), ``flagged`` and ``hours`` (from its first row)."""
+    rows = _positioned(study.tracks, tag).sort_values("epoch_s", kind="stable")
     epoch = rows["epoch_s"].to_numpy(float)
     return rows.assign(sigma_m=np.hypot(rows["sigma_x"].to_numpy(float), rows["sigma_y"].to_numpy(float)),
                        flagged=(rows["quality"].astype(str) == "flagged").to_numpy(),
@@ -32,9 +40,10 @@ def tag_rows(study: StudyFolder, tag: str) -> pd.DataFrame:
 
 
 def flag_counts(study: StudyFolder, tag: str) -> dict[str, int]:
-    """A tag's flagged rows of ``tracks.csv`` counted by reason (``quality_reason``: a row with several, separated
-    by ``;``, counted under each), the most first."""
-    rows = study.tracks[(study.tracks["tag"].astype(str) == tag) & (study.tracks["quality"] == "flagged")]
+    """A tag's flagged rows of ``tracks.csv`` (those positioned, as ``tags.csv``'s ``flagged`` counts them) by
+    reason (``quality_reason``: a row with several, separated by ``;``, counted under each), the most first."""
+    rows = _positioned(study.tracks, tag)
+    rows = rows[rows["quality"] == "flagged"]
     if "quality_reason" not in rows:
         return {NO_REASON: len(rows)} if len(rows) else {}
     reasons = rows["quality_reason"].astype(str).str.split(";").explode().str.strip().replace("", NO_REASON)
@@ -49,7 +58,7 @@ def _depths(study: StudyFolder, tag: str, rows: pd.DataFrame) -> list[tuple[np.n
         out.append((rows["hours"].to_numpy(), -rows["z"].to_numpy(float), "track (−z)"))
     pings = study.tag_pings.get(tag)
     if pings is not None and "time" in pings and len(rows):
-        t0 = float(rows["epoch_s"].iloc[0])
+        t0 = float(rows["epoch_s"].iloc[0])  # the first row positioned
         out.append(((pings["time"].to_numpy(float) - t0) / 3600.0, pings["depth_m"].to_numpy(float), "sensor"))
     return out
 
