@@ -14,7 +14,7 @@ from collections import Counter
 from typing import Any
 
 from sblsim.models.tracking.timing import SIGMA_TOA
-from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_INPUT, CHOSEN_UTM
+from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_UTM
 from sblsim.orchestrator.telemetry.report.figures_study import summary_value
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
 from sblsim.orchestrator.telemetry.study import TOO_COARSE
@@ -69,7 +69,7 @@ def _frame(s: dict[str, Any]) -> dict[str, str]:
                 "how": "the receivers file's x_m, y_m without --crs", "option": "--crs (the positions' CRS)"}
     chosen = _text(frame.get("chosen"))
     return {"what": "frame", "taken": f"{frame.get('name')} ({frame.get('crs')})",
-            "how": _said(chosen, chosen in (CHOSEN_UTM, CHOSEN_INPUT)) if chosen != CHOSEN_GIVEN else "given",
+            "how": "given (--frame)" if chosen == CHOSEN_GIVEN else _said(chosen, chosen == CHOSEN_UTM),
             "option": "--frame EPSG:… (a metric CRS); --crs for the positions' own"}
 
 

@@ -95,9 +95,10 @@ def daily_figure(study: StudyFolder) -> Image | None:
     every = max(1, int(np.ceil(len(days) / 14)))
     ax.set_xticks(range(0, len(days), every), days[::every], fontsize=7, rotation=30, ha="right")
     if len(names) * len(days) <= 400:
+        bright = image.norm(np.maximum(counts, 1)) > 0.6  # viridis' yellow end: dark text on it
         for (i, j), n in np.ndenumerate(counts):
             if n > 0:
-                ax.text(j, i, f"{n:,.0f}", ha="center", va="center", fontsize=6, color="w")
+                ax.text(j, i, f"{n:,.0f}", ha="center", va="center", fontsize=6, color="k" if bright[i, j] else "w")
     ax.set_title("kept detections per receiver and UTC day (pale red: deployed and none logged; grey: not "
                  "deployed)", fontsize=8, loc="left")
     bar = fig.colorbar(image, ax=ax, fraction=0.03, pad=0.01)
