@@ -137,16 +137,16 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
 
         pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
                                    initializer=watch_parent, initargs=(os.getpid(),))
-        ended = False
+        all_done = False  # (not `ended`: the callback's name, which done() calls)
         try:
             pending = {pool.submit(track_tag, toa, receivers, options): name for name, toa, receivers, options in jobs}
             while pending:
                 finished, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for future in finished:
                     done(pending.pop(future), future.result())
-            ended = True
+            all_done = True
         finally:
-            if not ended:  # stopped (while submitting too) or failed: the tags under way stopped, not awaited
+            if not all_done:  # stopped (while submitting too) or failed: the tags under way stopped, not awaited
                 stop_pool(pool)
             else:
                 pool.shutdown()

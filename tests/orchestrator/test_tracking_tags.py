@@ -97,3 +97,19 @@ def test_worker_processes_and_a_dask_cluster_give_the_tracks_of_one_process(tmp_
         one = pd.read_csv(tmp_path / "one" / f"tag{k}" / "track.csv")
         many = pd.read_csv(tmp_path / "many" / f"tag{k}" / "track.csv")
         pd.testing.assert_frame_equal(one, many)
+
+
+def test_two_worker_processes_call_back_as_each_tag_ends(tmp_path):
+    """run_tracks in two worker processes: each tag's callback called once with its outcome, the results those of
+    one process (a local variable named as the callback had made every multi-worker study fail)."""
+    from sblsim.orchestrator.tracks.many import run_tracks
+
+    folder, receivers = _array(tmp_path, tags=2)
+    options = {"sound_speed": 1480.0, "other_filters": False}
+    jobs = [(f"tag{k}", folder / f"tag{k}.txt", receivers, options) for k in range(2)]
+    called: list[str] = []
+    many = run_tracks(jobs, workers=2, ended=lambda name, result: called.append(name))
+    one = run_tracks(jobs, workers=1)
+    assert sorted(called) == ["tag0", "tag1"] and set(many) == {"tag0", "tag1"}
+    for name in many:
+        pd.testing.assert_frame_equal(many[name].track, one[name].track)
