@@ -36,6 +36,8 @@ from typing import Any, Mapping, Sequence
 
 import casadi as ca
 
+from sblsim.models.interrupts import check
+
 
 @dataclass(frozen=True)
 class Stream:
@@ -248,6 +250,7 @@ class ProgramBuilder:
 
         ``p`` is the parameter vector to view (default the SX symbol; ``prepare`` views an MX one).
         """
+        check()  # each view begins a piece of the symbolic build: a stop whose exception casadi lost ends it here
         p = self.p if p is None else p
         out = {v.name: p[k] for k, v in enumerate(self.param_vars)}
         index = {v.name: k for k, v in enumerate(self.param_vars)}
