@@ -92,6 +92,9 @@ class RobustTrack:
     P_lag : ndarray, (m − 1, s, s), or None
         The covariances of successive states, ``cov(x_k+1, x_k)`` (with ``P``; the lag-one blocks of the same
         inverse).
+    converged : bool
+        Whether the start kept stopped by itself (a step gaining less than :data:`ROBUST_TOLERANCE` of the cost, or
+        none lowering it), not at the ``iterations`` allowed.
     """
 
     x: np.ndarray
@@ -102,6 +105,7 @@ class RobustTrack:
     start: int
     start_names: tuple[str, ...] = ()
     P_lag: np.ndarray | None = None
+    converged: bool = True
 
 
 
@@ -264,7 +268,8 @@ def robust_smooth(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSetti
     P, lag = _covariance(problem, X, sums, dof) if covariance else (None, None)
     weights = np.zeros((m, n))
     weights[problem.k, problem.i] = w
-    return RobustTrack(X, P, weights, cost, best["done"], index if index < given else first.start, P_lag=lag)
+    return RobustTrack(X, P, weights, cost, best["done"], index if index < given else first.start, P_lag=lag,
+                       converged=bool(best["converged"]))
 
 
 def _covariance(problem: _Problem, X: np.ndarray, sums: np.ndarray, dof: float) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,9 @@ from scipy.linalg import solveh_banded
 
 from sblsim.models.tracking.smoother_cost import _depth_residual, _interval_prior, _Problem
 
+#: Pings whose band entries :func:`_banded_solve` copies across at once (their band 96 KiB in 2-D).
+ACROSS = 256
+
 
 def _normal_blocks(problem: _Problem, X: np.ndarray, sums: np.ndarray, T: np.ndarray, lo: int = 0,
                    hi: int | None = None) -> tuple:
@@ -149,6 +152,25 @@ def _step_system(problem: _Problem, X: np.ndarray, sums: np.ndarray, e: np.ndarr
     return D, B, np.negative(g, out=g)
 
 
+def _held_system(held: np.ndarray, system, lo: int, hi: int) -> tuple:
+    """``system(lo, hi)`` (:func:`_step_system`'s) with the rows ``held`` (m,) bool fixed: their diagonal blocks the
+    identity, their couplings to the rows beside and their right-hand side zero, so that the step leaves them where
+    they are and the other rows' step is the one conditioned on them (a window of a track re-solved, the rest held)."""
+    D, B, g = system(lo, hi)
+    here = held[lo:hi]
+    if here.any():
+        for (i, j), value in D.items():
+            value[here] = 1.0 if i == j else 0.0
+        g[here] = 0.0
+    if len(B):
+        rows = len(next(iter(B.values())))
+        touched = here[:rows] | held[lo + 1:lo + 1 + rows]  # the blocks (k, k + 1) with k or k + 1 held
+        if touched.any():
+            for value in B.values():
+                value[touched] = 0.0
+    return D, B, g
+
+
 def _given_system(D: dict, B: dict, g: np.ndarray):
     """:func:`_banded_solve`'s ``system`` of the entries ``D``, ``B`` over all pings (:func:`_normal_blocks`) and the
     right-hand side g (m, s)."""
@@ -176,18 +198,25 @@ def _banded_solve(problem: _Problem, system, ridge: np.ndarray | float = 0.0, ou
     u = s + 1
     if problem.band is None:  # ab's transpose: ab itself in Fortran order, which LAPACK takes in place
         problem.band, problem.rhs = np.empty((m * s, u + 1)), np.empty((m, s))
+    # a chunk's band entries first as rows over its pings (each entry's values contiguous), then copied across
+    # :data:`ACROSS` pings at a time (their band in the processor's cache): written an entry at a time into the band
+    # (a ping's s (u + 1) entries side by side), each entry would be a strided pass over the chunk's band
+    across = np.empty((s * (u + 1), max((hi - lo for lo, hi, *_ in problem.chunks()), default=0)))
     for lo, hi, *_ in problem.chunks():
         D, B, g = system(lo, hi)
-        view = problem.band[lo * s:hi * s].reshape(hi - lo, s, u + 1)
-        view.fill(0.0)
+        rows = across[:, :hi - lo]
+        rows.fill(0.0)
         local = ridge[lo:hi] if np.ndim(ridge) else ridge
         for (i, j), value in D.items():
             first, second = sorted((place[i], place[j]))
             if i == j:
                 value = value + (local[:, i] if np.ndim(local) else local)
-            view[:, first, second - first] = value
+            rows[first * (u + 1) + second - first] = value
         for (i, j), value in B.items():  # N[(k, i), (k + 1, j)] → lower N[(k + 1, j), (k, i)]
-            view[:len(value), place[i], s + place[j] - place[i]] = value
+            rows[place[i] * (u + 1) + s + place[j] - place[i], :len(value)] = value
+        flat = problem.band[lo * s:hi * s].reshape(hi - lo, s * (u + 1))
+        for a in range(0, hi - lo, ACROSS):
+            flat[a:a + ACROSS] = rows[:, a:a + ACROSS].T
         problem.rhs[lo:hi, place] = g
     solved = solveh_banded(problem.band.T, problem.rhs.reshape(-1), overwrite_ab=True, overwrite_b=True, lower=True,
                            check_finite=False)

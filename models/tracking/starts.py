@@ -24,6 +24,7 @@ from sblsim.models.tracking.smoother import (
     robust_smooth,
     with_covariance,
 )
+from sblsim.models.tracking.smoother_windows import Resolved, resolved_windows
 
 
 def graduated_start(toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings, start: np.ndarray,
@@ -148,8 +149,17 @@ def _near_the_neighbours(position: np.ndarray, times: np.ndarray, fix_speed: flo
 #: Pings each side of a fix that :func:`spliced` moves with it (the move tapering linearly to none beyond them).
 SPLICE_WINDOW = 3
 
-#: Rounds of :func:`with_fixes_spliced` at most (each a re-solve of the whole record from two starts).
+#: Rounds of :func:`with_fixes_spliced` at most (each a re-solve of the windows about the fixes to splice).
 SPLICE_ROUNDS = 3
+
+#: Pings each side of a fix to splice that its window re-solves at first (:func:`with_fixes_spliced`; beyond
+#: :data:`SPLICE_WINDOW`, the splice's own reach).
+SPLICE_MARGIN = 16
+
+#: A window's solve from the splice counts as the whole record's where its rows beside the held ones lie within this
+#: [m] of the same window's solve from the track (the position, or the emission time times the sound speed): the
+#: splice's reach ends inside it. Else its margins are doubled and it is solved again.
+SPLICE_EDGE = 1e-7
 
 
 def splice_pings(X: np.ndarray, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
@@ -179,13 +189,13 @@ def splice_pings(X: np.ndarray, toa: np.ndarray, receivers: np.ndarray, settings
     """
     position = np.asarray(fixes[0], float)
     dim = receivers.shape[1]
-    found = np.isfinite(position).all(axis=1) & np.isfinite(fixes[1])
-    at = np.where(found[:, None], position, np.nan)
-    theirs = explained(toa, receivers, at, settings.sound_speed, settings.sigma_toa)
-    ours = explained(toa, receivers, X[:, :dim], settings.sound_speed, settings.sigma_toa)
     with np.errstate(invalid="ignore"):
-        far = np.linalg.norm(X[:, :2] - position[:, :2], axis=1) > FIX_SLACK
-    return np.flatnonzero(found & (theirs >= dim + 1) & (theirs > ours) & far)
+        far = np.linalg.norm(X[:, :2] - position[:, :2], axis=1) > FIX_SLACK  # False where no fix
+    far &= np.isfinite(position).all(axis=1) & np.isfinite(fixes[1])
+    rows = np.flatnonzero(far)  # each ping's count its own arrivals' (explained): those of these pings alone
+    theirs = explained(toa[rows], receivers, position[rows], settings.sound_speed, settings.sigma_toa)
+    ours = explained(toa[rows], receivers, X[rows, :dim], settings.sound_speed, settings.sigma_toa)
+    return rows[(theirs >= dim + 1) & (theirs > ours)]
 
 
 def spliced(X: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray], pings: np.ndarray) -> np.ndarray:
@@ -210,8 +220,8 @@ def spliced(X: np.ndarray, fixes: tuple[np.ndarray, np.ndarray, np.ndarray], pin
 def with_fixes_spliced(track: RobustTrack, toa: np.ndarray, receivers: np.ndarray, settings: TrackerSettings,
                        fixes: tuple[np.ndarray, np.ndarray, np.ndarray], schedule: PingSchedule,
                        depth: np.ndarray | None = None) -> RobustTrack:
-    """The robust smoother re-solved from the track and from the track with the fixes it disagrees with spliced in
-    (:func:`splice_pings`, :func:`spliced`), kept where its cost is lower by more than
+    """The robust smoother re-solved from the track with the fixes it disagrees with spliced in (:func:`splice_pings`,
+    :func:`spliced`), kept where the whole cost is lower by more than
     :data:`~sblsim.models.tracking.modes.MODE_BETTER`; up to :data:`SPLICE_ROUNDS` rounds while any such fix
     remains.
 
@@ -221,6 +231,14 @@ def with_fixes_spliced(track: RobustTrack, toa: np.ndarray, receivers: np.ndarra
     of the whole record and do not leave that minimum. Each fix's splice is a local restart; the whole cost decides
     (on the 8 hydrophones of Lake Hald at U(20, 40) s, seed 1: the cost from 1,127 to 772, the RMS against the GPS
     from 17.9 to 5.15 m, docs/tracking.md).
+
+    The cost is a sum of local terms, so a round re-solves the splice's windows alone, the rest of the track held
+    (:func:`splice_windows`), as the whole record's re-solve from the track and from its splice would: the splice
+    kept where it is lower than the track after the smoother's screening steps
+    (:data:`~sblsim.models.tracking.smoother.ROBUST_SCREEN`) and, at the end, lower by more than ``MODE_BETTER``
+    (all its windows together); the rest of the track, at its minimum already, moves by no more than the smoother's
+    own stop leaves (micrometres). A track its solve left unconverged (stopped at its iterations allowed) has no
+    minimum to hold: its rounds re-solve the whole record from the track and from its splice.
 
     Parameters
     ----------
@@ -234,23 +252,104 @@ def with_fixes_spliced(track: RobustTrack, toa: np.ndarray, receivers: np.ndarra
     Returns
     -------
     RobustTrack
-        The track of the lowest cost found (``start`` and ``start_names`` the given track's), with its covariance
-        where the given track has one (made once, for the track kept: a round's re-solve makes none).
+        The track of the lowest cost found (``start`` and ``start_names`` the given track's; the windows' weights
+        their solve's and the cost lowered by their gain, or a whole re-solve's answer), with its covariance where
+        the given track has one (made once, for the track kept: a round's re-solve makes none); the given track
+        itself where no round was kept.
     """
-    covariance, improved = track.P is not None, False
+    given, covariance = track, track.P is not None
     for _ in range(SPLICE_ROUNDS):
         pings = splice_pings(track.x, toa, receivers, settings, fixes)
         if not len(pings):
             break
-        again = robust_smooth(toa, receivers, settings, [track.x, spliced(track.x, fixes, pings)],
-                              schedule=schedule, depth=depth, covariance=False, student_start=False)
-        if not again.cost < track.cost - MODE_BETTER:
+        start = spliced(track.x, fixes, pings)
+        if not track.converged:
+            again = robust_smooth(toa, receivers, settings, [track.x, start], schedule=schedule, depth=depth,
+                                  covariance=False, student_start=False)
+            if not again.cost < track.cost - MODE_BETTER:
+                break
+            track = replace(again, start=given.start, start_names=given.start_names)
+            continue
+        found = splice_windows(track.x, start, pings, toa, receivers, settings, schedule, depth)
+        del start
+        if not (found.screened.sum() > 0.0 and found.gain.sum() > MODE_BETTER):
             break
-        track, improved = replace(again, start=track.start, start_names=track.start_names), True
-    if improved and covariance:
-        track = with_covariance(track, toa, receivers, settings, schedule, depth)
-    return track
+        X, weights = track.x.copy(), track.weights.copy()
+        for b in range(len(found.lo)):
+            X[found.lo[b]:found.hi[b]] = found.x[b]
+            weights[found.lo[b]:found.hi[b]] = found.weights[b]
+        track = replace(track, x=X, weights=weights, cost=track.cost - float(found.gain.sum()), P=None, P_lag=None)
+    if track is given:
+        return given
+    return with_covariance(track, toa, receivers, settings, schedule, depth) if covariance else track
 
 
-__all__ = ["NEIGHBOURS", "SPLICE_ROUNDS", "SPLICE_WINDOW", "anchored_start", "graduated_start", "robust_track",
-           "splice_pings", "spliced", "with_fixes_spliced"]
+def splice_windows(X: np.ndarray, start: np.ndarray, pings: np.ndarray, toa: np.ndarray, receivers: np.ndarray,
+                   settings: TrackerSettings, schedule: PingSchedule, depth: np.ndarray | None = None) -> Resolved:
+    """The windows of the fixes to splice re-solved from their splice, the rest of the track held
+    (:func:`~sblsim.models.tracking.smoother_windows.resolved_windows`): :data:`SPLICE_MARGIN` pings each side of
+    each of ``pings`` (windows that would overlap or touch joined), each window's margins doubled and it solved
+    again from the splice while its solve moves its rows beside the held ones by :data:`SPLICE_EDGE` or more from
+    where the track's own states go in the same window (up to the record's ends: the whole record's re-solve from
+    the splice); the windows not solved on where the splice loses the screening (its windows' cost after
+    :data:`~sblsim.models.tracking.smoother.ROBUST_SCREEN` steps not below the track's there, as a whole record's
+    re-solve drops a start), nor widened where their gain together is not above
+    :data:`~sblsim.models.tracking.modes.MODE_BETTER` (the splice not kept).
+
+    Parameters
+    ----------
+    X : ndarray, (m, 2 dim + 2)
+        The track's states.
+    start : ndarray, (m, 2 dim + 2)
+        The track with the fixes spliced in (:func:`spliced`).
+    pings : ndarray of int
+        The fixes spliced (:func:`splice_pings`), increasing.
+    toa, receivers, settings, schedule, depth
+        As the track was solved with.
+
+    Returns
+    -------
+    Resolved
+        The windows, each with its gain (the whole cost's fall were its states put in); where the splice lost its
+        screening, the screening's (:attr:`~sblsim.models.tracking.smoother_windows.Resolved.screened`, its sum
+        not above 0), and the edges NaN where not measured.
+    """
+    m = len(X)
+    margin = np.full(len(pings), SPLICE_MARGIN)
+    done: dict[tuple[int, int], tuple] = {}  # each window solved: its states, weights, gains, edge
+    first = True  # the first windows decide whether the splice is screened out, or not kept and not widened
+    while True:
+        lo, hi, owner = _joined(pings, margin, m)
+        new = [b for b in range(len(lo)) if (lo[b], hi[b]) not in done]
+        found = resolved_windows(X, start, lo[new], hi[new], toa, receivers, settings, schedule, depth,
+                                 lost=(lambda screened: not screened.sum() > 0.0) if first else None,
+                                 keep=(lambda gain: gain.sum() > MODE_BETTER) if first else None)
+        first = False
+        wide = set()
+        for a, b in enumerate(new):
+            done[lo[b], hi[b]] = (found.x[a], found.weights[a], found.gain[a], found.screened[a], found.edge[a])
+            if found.edge[a] >= SPLICE_EDGE:  # not where the windows are not kept (NaN)
+                wide.add(b)
+        if not wide:
+            parts = [done[key] for key in zip(lo, hi)]
+            return Resolved(lo, hi, [p[0] for p in parts], [p[1] for p in parts],
+                            *(np.array([p[c] for p in parts]) for c in (2, 3, 4)))
+        margin[np.isin(owner, list(wide))] *= 2
+
+
+def _joined(pings: np.ndarray, margin: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The windows ``lo:hi`` (B,) of ``margin`` (p,) pings each side of ``pings`` (p,), increasing, within ``0:m``,
+    those that overlap or touch (one window's held rows ``lo − 1`` and ``hi`` another's rows) joined; and each
+    ping's window (p,)."""
+    lo, hi = np.maximum(pings - margin, 0), np.minimum(pings + margin + 1, m)
+    order = np.argsort(lo, kind="stable")
+    reach = np.maximum.accumulate(hi[order])
+    starts = np.r_[True, lo[order][1:] > reach[:-1]]  # a new window where a ping's rows begin past the last's reach
+    group = np.empty(len(pings), int)
+    group[order] = np.cumsum(starts) - 1
+    first = np.flatnonzero(starts)
+    return lo[order][first], np.maximum.reduceat(hi[order], first), group
+
+
+__all__ = ["NEIGHBOURS", "SPLICE_EDGE", "SPLICE_MARGIN", "SPLICE_ROUNDS", "SPLICE_WINDOW", "anchored_start",
+           "graduated_start", "robust_track", "splice_pings", "splice_windows", "spliced", "with_fixes_spliced"]
