@@ -1,7 +1,7 @@
 """Time the robust smoother's track of a long synthetic record (issue 67, "Scale") on one core: 10⁶ pings, a month
 of a 2.5 s tag.
 
-Run:  python benchmarks/bench_tracking_scale.py [--pings N] [--replay-pings N] [--seed S]
+Run:  python benchmarks/bench_tracking_scale.py [--pings N] [--replay-pings N] [--seed S] [--no-baseline]
 
 The record (:func:`simulate`): a tag on a stable 2.5 s interval (its clock's jitter and drift as the tracker's
 model says, :func:`~sblsim.models.tracking.simulate.simulate_pings`, seeded) moving along a Lissajous path of
@@ -20,6 +20,13 @@ before it where Linux allows, else since the start); the per-ping time against t
 loop) per ping beside it; and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
 the EKF, the sequential EKF, the UKF, both smoothers, the quality marks, scoring) at ``--replay-pings``. A JSON
 line last.
+
+The baseline, measured in the same run on the same records (unless ``--no-baseline``): the same track with the
+fixes' splice rounds as they were before (:func:`whole_rounds`: each round a re-solve of the whole record from the
+track and from its splice) in place of today's (:func:`~sblsim.models.tracking.starts.with_fixes_spliced`: each
+round the splices' own windows re-solved, the rest held); each size's CPU time against it, the rounds' own CPU time
+in each (``splice_cpu_s``), and how far today's track lies from it (the largest move of a position, and of an
+emission time times the sound speed, [m]).
 """
 
 from __future__ import annotations
@@ -31,8 +38,10 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # 
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import resource  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -80,30 +89,88 @@ def simulate(n_pings: int, seed: int = 0, multipath: tuple[float, float] | None 
     return toa, receivers, truth, emissions, settings
 
 
-def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> dict:
+def cpu_s() -> float:
+    """The process's CPU time so far, user and system [s] (:func:`resource.getrusage`: the time on a core, whatever
+    else the machine runs)."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+def whole_rounds(track, toa, receivers, settings, fixes, schedule, depth=None):
+    """The baseline's splice rounds: :func:`~sblsim.models.tracking.starts.with_fixes_spliced` as it was before the
+    windows (each round a re-solve of the whole record from the track and from its splice, kept where the cost is
+    lower by more than ``MODE_BETTER``; the covariance made once, for the track kept)."""
+    from sblsim.models.tracking.modes import MODE_BETTER
+    from sblsim.models.tracking.smoother import robust_smooth, with_covariance
+    from sblsim.models.tracking.starts import SPLICE_ROUNDS, splice_pings, spliced
+
+    covariance, improved = track.P is not None, False
+    for _ in range(SPLICE_ROUNDS):
+        pings = splice_pings(track.x, toa, receivers, settings, fixes)
+        if not len(pings):
+            break
+        again = robust_smooth(toa, receivers, settings, [track.x, spliced(track.x, fixes, pings)],
+                              schedule=schedule, depth=depth, covariance=False, student_start=False)
+        if not again.cost < track.cost - MODE_BETTER:
+            break
+        track, improved = replace(again, start=track.start, start_names=track.start_names), True
+    if improved and covariance:
+        track = with_covariance(track, toa, receivers, settings, schedule, depth)
+    return track
+
+
+@contextmanager
+def splice_rounds(baseline: bool, spent: list):
+    """:func:`robust_track`'s splice rounds today's, or the baseline's (:func:`whole_rounds`), for the block; each
+    call's CPU time [s] appended to ``spent``."""
+    from sblsim.models.tracking import starts
+
+    today = starts.with_fixes_spliced
+    rounds = whole_rounds if baseline else today
+
+    def timed(*args, **kwargs):
+        begun = cpu_s()
+        try:
+            return rounds(*args, **kwargs)
+        finally:
+            spent.append(cpu_s() - begun)
+
+    starts.with_fixes_spliced = timed
+    try:
+        yield
+    finally:
+        starts.with_fixes_spliced = today
+
+
+def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float,
+          baseline: bool = False) -> dict:
     """The robust smoother's track of a record (module docstring) with each stage's time [s]: ``fixes_s``,
     ``schedule_s`` (the settings and the schedule), ``robust_s`` (:func:`robust_track`), ``track_s`` (their sum),
-    the process's CPU time of the fixes, of :func:`robust_track` and of the track (``fixes_cpu_s``,
-    ``robust_cpu_s``, ``track_cpu_s``: the time on a core, whatever else the machine runs), ``peak_bytes`` (the
-    high-water mark over them), ``peak_reset`` (whether it was reset before) and ``robust`` (the
-    :class:`RobustTrack`)."""
+    the process's CPU time of the fixes, of :func:`robust_track`, of its splice rounds and of the track
+    (``fixes_cpu_s``, ``robust_cpu_s``, ``splice_cpu_s``, ``track_cpu_s``: the time on a core, whatever else the
+    machine runs), ``peak_bytes`` (the high-water mark over them), ``peak_reset`` (whether it was reset before) and
+    ``robust`` (the :class:`RobustTrack`); with ``baseline``, the splice rounds the baseline's
+    (:func:`whole_rounds`)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.timing import SIGMA_TOA
     from sblsim.orchestrator.tracks.tracker import ping_schedule, tracker_settings
 
     reset = reset_peak()
-    start, cpu = time.perf_counter(), time.process_time()
+    start, cpu = time.perf_counter(), cpu_s()
     fx, fe, _, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
-    fixed, fixed_cpu = time.perf_counter(), time.process_time()
+    fixed, fixed_cpu = time.perf_counter(), cpu_s()
     settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)
     schedule, _ = ping_schedule(toa, receivers, settings)
     settings = replace(settings, interval=schedule.interval)
-    scheduled, scheduled_cpu = time.perf_counter(), time.process_time()
-    robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule)
-    done, done_cpu = time.perf_counter(), time.process_time()
+    scheduled, scheduled_cpu = time.perf_counter(), cpu_s()
+    spent: list = []
+    with splice_rounds(baseline, spent):
+        robust = tt.robust_track(toa, receivers, settings, (fx, fe, fused), None, schedule)
+    done, done_cpu = time.perf_counter(), cpu_s()
     return {"fixes_s": fixed - start, "schedule_s": scheduled - fixed, "robust_s": done - scheduled,
             "track_s": done - start, "fixes_cpu_s": fixed_cpu - cpu, "robust_cpu_s": done_cpu - scheduled_cpu,
-            "track_cpu_s": done_cpu - cpu, "peak_bytes": peak_bytes(), "peak_reset": reset, "robust": robust}
+            "splice_cpu_s": sum(spent), "track_cpu_s": done_cpu - cpu, "peak_bytes": peak_bytes(),
+            "peak_reset": reset, "robust": robust}
 
 
 def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
@@ -143,26 +210,42 @@ def replay(n_pings: int, seed: int = 0) -> dict:
         return {"replay_s": time.perf_counter() - start, "replay_rms_m": result.score["rms_m"]}
 
 
-def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3) -> dict:
+def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3, baseline: bool = True) -> dict:
     """The timings (module docstring) at ``sizes`` sizes up to ``n_pings`` (each a tenth of the next), and the whole
     replay at ``replay_pings`` (0: not run). Returns the JSON's fields and ``runs`` (per size: ``pings``, the
     stages' times, ``per_ping_us`` [µs], ``ratio`` to the smallest size's per-ping time, ``peak_bytes``,
     ``rms_m`` of the robust track against the simulated truth, ``sigma_m`` the timing noise's own position scale
-    (σ_toa c), ``iterations``, ``start``) and ``robust`` (the largest size's :class:`RobustTrack`)."""
+    (σ_toa c), ``iterations``, ``start``; with ``baseline``, ``baseline`` the same of the baseline's track
+    (:func:`whole_rounds`), ``cpu_ratio`` today's CPU time over its, ``moved_m`` and ``moved_te_m`` the largest
+    difference of a position and of an emission time times the sound speed between the two tracks [m]) and
+    ``robust`` (the largest size's :class:`RobustTrack`)."""
     counts = sorted({max(n_pings // 10**k, 100) for k in range(sizes)})
     small = simulate(counts[0], seed)
     track(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)  # loads the modules, untimed
     ekf_s = ekf_rts(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)
     runs, robust = [], None
+
+    def summary(r, count, truth, arrivals):
+        out = r.pop("robust")
+        error = np.hypot(*(out.x[:, :2] - truth).T)
+        return out, {"pings": count, **r, "per_ping_us": 1e6 * r["track_s"] / count,
+                     "rms_m": float(np.sqrt(np.mean(error**2))), "iterations": out.iterations,
+                     "start": out.start_names[out.start], "arrivals": arrivals}
+
     for count in counts:
         toa, receivers, truth, _, settings = simulate(count, seed)
-        r = track(toa, receivers, SOUND_SPEED, settings.acceleration_psd)
-        robust = r.pop("robust")
-        error = np.hypot(*(robust.x[:, :2] - truth).T)
-        runs.append({"pings": count, **r, "per_ping_us": 1e6 * r["track_s"] / count,
-                     "rms_m": float(np.sqrt(np.mean(error**2))), "sigma_m": settings.sigma_toa * SOUND_SPEED,
-                     "iterations": robust.iterations, "start": robust.start_names[robust.start],
-                     "arrivals": int(np.isfinite(toa).sum())})
+        arrivals = int(np.isfinite(toa).sum())
+        robust, run = summary(track(toa, receivers, SOUND_SPEED, settings.acceleration_psd), count, truth, arrivals)
+        run["sigma_m"] = settings.sigma_toa * SOUND_SPEED
+        if baseline:  # the same record, the splice rounds the baseline's; today's states alone kept meanwhile
+            robust = replace(robust, P=None, P_lag=None)
+            before, run["baseline"] = summary(track(toa, receivers, SOUND_SPEED, settings.acceleration_psd, True),
+                                              count, truth, arrivals)
+            run["cpu_ratio"] = run["track_cpu_s"] / run["baseline"]["track_cpu_s"]
+            run["moved_m"] = float(np.hypot(*(robust.x[:, :2] - before.x[:, :2]).T).max())
+            run["moved_te_m"] = float(SOUND_SPEED * np.abs(robust.x[:, -2] - before.x[:, -2]).max())
+            del before
+        runs.append(run)
         del toa, receivers, truth
     for run in runs:
         run["ratio"] = run["per_ping_us"] / runs[0]["per_ping_us"]
@@ -174,6 +257,9 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3) 
            "per_ping_us": [run["per_ping_us"] for run in runs], "ratio": [run["ratio"] for run in runs],
            "sizes": counts, "rms_m": last["rms_m"], "ekf_rts_per_ping_us": 1e6 * ekf_s / counts[0],
            "cores": os.cpu_count(), "runs": runs, "robust": robust}
+    if baseline:
+        out |= {"baseline_track_cpu_s": last["baseline"]["track_cpu_s"], "cpu_ratio": last["cpu_ratio"],
+                "moved_m": last["moved_m"], "moved_te_m": last["moved_te_m"]}
     if replay_pings:
         out |= {"replay_pings": replay_pings, **replay(replay_pings, seed)}
     return out
@@ -184,21 +270,30 @@ def main() -> None:
     parser.add_argument("--pings", type=int, default=10**6, help="the largest record's pings (default 10⁶)")
     parser.add_argument("--replay-pings", type=int, default=10**4, help="the whole replay's pings (0: not run)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-baseline", action="store_true",
+                        help="skip the baseline (the splice rounds as whole-record re-solves) in the same run")
     args = parser.parse_args()
     if args.pings < 100:
         parser.error("--pings: must be at least 100")
     if args.replay_pings < 0:
         parser.error("--replay-pings: must be 0 or more")
-    r = measure(args.pings, args.seed, args.replay_pings)
+    r = measure(args.pings, args.seed, args.replay_pings, baseline=not args.no_baseline)
     for run in r["runs"]:
         print(f"{run['pings']:>9,} pings ({run['arrivals']:,} arrivals): the track {run['track_s']:7.2f} s (fixes "
               f"{run['fixes_s']:.2f}, schedule {run['schedule_s']:.2f}, robust_track {run['robust_s']:.2f}; "
               f"{run['iterations']} steps from the {run['start']} start; CPU {run['track_cpu_s']:.2f} s: fixes "
-              f"{run['fixes_cpu_s']:.2f}, robust_track {run['robust_cpu_s']:.2f}), {run['per_ping_us']:.1f} µs per "
-              f"ping ({run['ratio']:.2f}× the smallest), peak {run['peak_bytes'] / 1024**3:.2f} GiB"
-              f"{'' if run['peak_reset'] else ' (since the start)'}; RMS error {run['rms_m']:.3f} m")
+              f"{run['fixes_cpu_s']:.2f}, robust_track {run['robust_cpu_s']:.2f}, its splice rounds "
+              f"{run['splice_cpu_s']:.2f}), {run['per_ping_us']:.1f} µs per ping ({run['ratio']:.2f}× the smallest), "
+              f"peak {run['peak_bytes'] / 1024**3:.2f} GiB{'' if run['peak_reset'] else ' (since the start)'}; "
+              f"RMS error {run['rms_m']:.3f} m")
+        if "baseline" in run:
+            base = run["baseline"]
+            print(f"{'':>9}   the baseline (splice rounds re-solving the whole record): CPU {base['track_cpu_s']:.2f} "
+                  f"s (its splice rounds {base['splice_cpu_s']:.2f}), peak {base['peak_bytes'] / 1024**3:.2f} GiB, "
+                  f"RMS error {base['rms_m']:.3f} m; today's CPU {run['cpu_ratio']:.2f}× its; the tracks apart by "
+                  f"{run['moved_m']:.2g} m at most (emission times {run['moved_te_m']:.2g} m)")
     print(f"the EKF with the RTS smoother at {r['sizes'][0]:,} pings: {r['ekf_rts_per_ping_us']:.1f} µs per ping; "
-          f"targets at 10⁶ pings: {r['target_s']:g} s and {r['target_gib']:g} GiB on one core")
+          f"targets at 10⁶ pings: {r['target_s']:g} s of CPU and {r['target_gib']:g} GiB on one core")
     if "replay_s" in r:
         print(f"the whole replay (EM, EKF, sequential EKF, UKF, both smoothers, quality, scoring) of "
               f"{r['replay_pings']:,} pings: {r['replay_s']:.2f} s, RMS error {r['replay_rms_m']:.3f} m")

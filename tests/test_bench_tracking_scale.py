@@ -1,6 +1,7 @@
 """The tracking benchmark at scale (``bench_tracking_scale.py``), run small: its robust track is the simulated tag's
 to within the timing noise's own position scale (scored here against the simulation made again), its per-ping
-times and ratios are those of its stages, and a bad size is one line, exit 2."""
+times and ratios are those of its stages, its baseline measured in the same run, and a bad size is one line,
+exit 2."""
 
 import subprocess
 import sys
@@ -32,6 +33,14 @@ def test_the_robust_track_of_a_small_record_is_the_tag_s_and_its_times_add_up():
         assert np.isclose(run["per_ping_us"], 1e6 * run["track_s"] / run["pings"], rtol=1e-12)
         assert run["peak_bytes"] > 0
     assert r["ratio"][0] == 1.0 and np.isclose(r["ratio"][1], r["per_ping_us"][1] / r["per_ping_us"][0], rtol=1e-12)
+    # the baseline in the same run (the splice rounds re-solving the whole record): its own CPU time, the ratio of
+    # the two, and today's track within a micrometre of it on this record
+    for run in r["runs"]:
+        base = run["baseline"]
+        assert base["pings"] == run["pings"] and base["track_cpu_s"] > 0.0 and run["splice_cpu_s"] >= 0.0
+        assert np.isclose(run["cpu_ratio"], run["track_cpu_s"] / base["track_cpu_s"], rtol=1e-12)
+        assert 0.0 <= run["moved_m"] < 1e-6 and 0.0 <= run["moved_te_m"] < 1e-6
+    assert r["cpu_ratio"] == r["runs"][-1]["cpu_ratio"]
 
 
 def test_a_bad_size_is_one_line_exit_2():
