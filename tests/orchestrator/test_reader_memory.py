@@ -2,7 +2,9 @@
 too many cells, a line too long, or a table of too many cells is refused in one line naming the file, the limit and
 the count, before pandas (or the csv module) builds a cell. The counts are checked against an independent count of
 the same text (``str.count``, ``str.split``, the csv module); the limits are lowered for the small tables here. The
-slow test runs ``sblsim sync`` on 100 MB of commas under an address-space limit."""
+slow tests run ``sblsim sync`` on 100 MB of commas under an address-space limit, and ``sblsim track`` on 2^25 cells of
+two characters (every count passed: the parse's own memory) within 1 GiB; the table pandas parses from the text's
+UTF-8 pieces is checked against pandas on the whole text."""
 
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ from sblsim.models.target.trajectories import MAX_LINE_CHARS, read_trajectory_fi
 from sblsim.orchestrator.design import area_file
 from sblsim.orchestrator.io import log_tables, tables
 from sblsim.orchestrator.logs import receiver_log, truth_track
-from sblsim.orchestrator.readers import detections, input_rows, receivers_file, time_series
+from sblsim.orchestrator.readers import cells, detections, input_rows, receivers_file, time_series
 from sblsim.orchestrator.readers import toa_matrix as toa
 from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
 from sblsim.orchestrator.readers.deployments import read_deployments
@@ -248,3 +250,53 @@ def test_sync_on_100_mb_of_commas_is_refused_in_one_line_within_1_5_gib(tmp_path
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert f"line 1 holds {100_000_001:,} cells; allowed at most {tables.MAX_LINE_CELLS:,} cells a line" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- the parse's own memory (issue 98 item 13)
+
+@pytest.mark.parametrize("text", [
+    "serial,name\n1,åsa\n2,\"two\nlines\"\r\n3,°C Ø\n\n4,end",
+    "a,b,c\n" + "".join(f"{k},é{k},\"x,{k}\"\n" for k in range(50)),
+    "tag,note\r\n1,\"\"\"quoted\"\"\"\r\n2,日本\r\n",
+])
+def test_the_table_parsed_from_its_utf8_pieces_is_the_text_s(text):
+    """The text handed to pandas a few characters at a time as UTF-8 (characters of two and three bytes cut between
+    pieces, a quoted cell over lines, CRLF, a blank line) is the table pandas makes of the whole text."""
+    expected = pd.read_csv(io.StringIO(text), header=None, dtype=object, keep_default_na=False, na_filter=False,
+                           skip_blank_lines=False)
+    for piece in (1, 3, 7, 1 << 20):
+        got = pd.read_csv(io.BufferedReader(cells._Utf8(text, piece), buffer_size=5), encoding="utf-8",
+                          **cells._CSV)
+        assert got.astype(object).values.tolist() == expected.values.tolist(), piece
+    header, body, lines = cells.text_table(text, "t.csv", "table", 100)
+    assert header == [h.strip() for h in expected.iloc[0].tolist()] and len(body) == len(lines)
+
+
+def _peak_child(args: list[str]) -> tuple[subprocess.CompletedProcess, float]:
+    """A command run in a child of a fresh interpreter: its result and its peak resident memory [GiB]
+    (``RUSAGE_CHILDREN`` of that interpreter, whose only child it is)."""
+    probe = ("import resource, subprocess, sys; p = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
+             "sys.stdout.write(repr((p.returncode, p.stderr, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)))")
+    run = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, timeout=900)
+    code, err, kib = eval(run.stdout)  # noqa: S307 - our own probe's repr of a tuple
+    return subprocess.CompletedProcess(args, code, "", err), kib / 2**20
+
+
+@pytest.mark.slow
+def test_2_25_tiny_cells_of_detections_are_refused_within_1_gib(tmp_path):
+    """A detections file of 2^25 cells of two characters (32 a row, the cells' bound: 100 MB) passes every count
+    and is refused at its first cell; ``sblsim track`` peaked at 1.07 GiB with the text parsed from an
+    ``io.StringIO``, now under 1 GiB."""
+    header = "epo,frac,tag,serial," + ",".join(f"c{k}" for k in range(28))
+    rows = detections.MAX_DETECTION_CELLS // 32 - 1
+    path = tmp_path / "detections.csv"
+    with open(path, "w") as handle:
+        handle.write(header + "\n")
+        handle.write((",".join(["ab"] * 32) + "\n") * rows)
+    assert (rows + 1) * 32 == detections.MAX_DETECTION_CELLS
+    proc, peak = _peak_child([sys.executable, "-m", "sblsim.orchestrator.cli", "track", str(path), "--receivers",
+                              str(REPO / "data" / "boats-norway" / "deployments.csv"), "--out", str(tmp_path / "o")])
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr[-2000:]
+    assert "line 2 column epo: 'ab' is not allowed" in lines[0], lines[0]
+    assert peak < 1.0, f"{peak:.2f} GiB"
