@@ -70,10 +70,11 @@ from sblsim.orchestrator.tracks.tracker import toa_noise
 
 #: The columns of ``tags.csv``: a tag's ``pings`` are always ``positioned`` + ``set_aside`` + ``not_positioned``
 #: (``not_positioned_why``: the count of each reason), ``status`` ``tracked`` only with a row positioned, else
-#: ``refused`` with its ``reason_code`` (:data:`~sblsim.orchestrator.telemetry.census.REASON_CODES`) and ``reason``.
+#: ``refused`` with its ``reason_code`` (:data:`~sblsim.orchestrator.telemetry.census.REASON_CODES`) and ``reason``;
+#: ``two_places`` the line saying a tracked tag's pings show a second place heard at once (its rows flagged).
 TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated", "status", "reason_code", "reason",
                "detections", "receivers", "pings", "pings_at_once", "positioned", "set_aside", "not_positioned",
-               "not_positioned_why", "flagged", "share_flagged", "median_sigma_m", "ping_type", "track",
+               "not_positioned_why", "flagged", "share_flagged", "two_places", "median_sigma_m", "ping_type", "track",
                "sound_speed_m_s", "sound_speed_source", "time_resolution_s", "first_utc", "last_utc", "folder",
                "wall_time_s")
 #: The columns of ``tags.csv`` that are counts (whole numbers; empty for a tag never detected).

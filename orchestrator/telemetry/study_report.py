@@ -84,6 +84,9 @@ def tag_lines(table: Any) -> list[tuple[str, bool]]:
     for row in table.itertuples(index=False):
         if row.status == "tracked":
             lines.append((tag_line(row), False))
+            second = getattr(row, "two_places", "")  # a second place heard at once: its rows flagged
+            if isinstance(second, str) and second:
+                lines.append((f"sblsim: warning: tag {row.tag}: {second}", True))
             if row.sound_speed_source in ("fallback", REPLACED_SOURCE):  # never taken without a word
                 lines.append((f"sblsim: warning: tag {row.tag}: the pings do not determine the sound speed "
                               f"({row.sound_speed_source}); taken: {row.sound_speed_m_s:.1f} m/s, every range scales "

@@ -79,6 +79,7 @@ def tracked_row(result, elapsed: float, row: dict[str, Any]) -> dict[str, Any]:
     times = track["epoch_s"].to_numpy(float)[placed] if "epoch_s" in track else np.array([])
     return counts | {"status": "tracked", "reason": "", "reason_code": "", "flagged": flagged,
                      "share_flagged": flagged / int(placed.sum()),
+                     "two_places": (s.get("two_places") or {}).get("warning", ""),
                      "median_sigma_m": float(np.median(sigma[ok])) if ok.any() else float("nan"),
                      "ping_type": s["ping_type"]["type"], "track": main,
                      "sound_speed_m_s": s["sound_speed"]["sound_speed_m_s"],

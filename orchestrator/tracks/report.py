@@ -65,6 +65,8 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             "earlier): set_aside.csv, their rows kept in track.csv with no estimate")
     if aside["warning"]:
         say(f"sblsim: warning: {aside['warning']}", True)
+    if s.get("two_places"):
+        say(f"sblsim: warning: {s['two_places']['warning']}", True)
     say("  " + noise_line(s["toa_noise"]))
     if c["source"] == "fallback":
         say(f"sblsim: warning: the pings do not determine the sound speed ({c['calibration']}); taken: "

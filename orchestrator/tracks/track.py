@@ -9,8 +9,9 @@ receivers' columns not used) and a share of the detections removed at random (``
 (:func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`), the motion model's noise estimated
 (:func:`~sblsim.orchestrator.tracks.tracker.motion_model`), the sound speed taken
 (:mod:`.speed`), and each estimate checked against its own data (the ``quality`` column). A stationary tag's one
-position is :mod:`.stationary`'s, the consider terms' pieces :mod:`.consider`'s, the check for two tags under one
-id :mod:`.two_tags`' and the outcome's shape :mod:`.outcome`'s.
+position is :mod:`.stationary`'s, the consider terms' pieces :mod:`.consider`'s, the checks for two tags under one
+id (refused, or a second place's rows flagged ``two_places`` at their fixes) :mod:`.two_tags`' and the outcome's
+shape :mod:`.outcome`'s.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ from sblsim.orchestrator.tracks.tracker import (
     toa_noise,
     tracker_settings,
 )
-from sblsim.orchestrator.tracks.two_tags import _one_tag
+from sblsim.orchestrator.tracks.two_tags import _one_tag, at_second_place, second_place
 
 
 def _with_reason(reason: pd.Series, name: str) -> pd.Series:
@@ -197,8 +198,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma,
                                               sigma_toa=sigma, water=water)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
-    _one_tag(toa_path, fx, fe, fc, qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2,
-                                                    dim, None if depth is None else np.isfinite(depth)))
+    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2, dim,
+                               None if depth is None else np.isfinite(depth))
+    _one_tag(toa_path, fx, fe, fc, trusted)
+    # a second place heard at once (two tags on one id): its rows out of the track, written at their fixes, flagged
+    toa, (fx, fe, fc, fused, fchi2), second = second_place(toa, (fx, fe, fc, fused, fchi2), trusted, protection_levels(
+        positions, fx, fused, c, sigma), receivers.frame)
     settings = replace(tracker_settings(c, fe, sigma), depth_sigma=depth_sigma)
     # the speed's standard error where it came from the pings or a fallback (a given or measured speed has none), a
     # consider term of the fixes' and the robust track's covariances as reported
@@ -353,6 +358,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 frame.loc[at, "quality_reason"] = SET_ASIDE_REASON
                 frame["receivers_heard"] = frame["receivers_heard"].astype(int)
                 flagged[estimator] = int((frame["quality"] == "flagged").sum())
+    if second is not None:
+        at_second_place(frames, covariances, flagged, main, second, placed)
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     at = np.full((len(toa), dim), np.nan)
@@ -376,7 +383,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                       "burst_interval_s": None if schedule.bounds is None else list(schedule.bounds),
                       "seen": {"typical_step_s": seen.interval, "steps_s": list(seen.bounds),
                                "spread_s": seen.spread, "type": seen.kind}},
-        "set_aside": aside | {"warning": aside_warning},
+        "set_aside": aside | {"warning": aside_warning}, "two_places": None if second is None else second.summary,
         "segments": [[int(a), int(b - 1)] for a, b in schedule.segments()],
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": 0 if record is None else len(record.restarts),
