@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from importlib.metadata import PackageNotFoundError, version
 
 from sblsim.orchestrator.io.stop import ending, exit_status, is_stop, stop_on, workers_ignore_ctrl_c
 
@@ -24,6 +23,7 @@ from sblsim.models.errors import SblsimError  # noqa: E402
 from sblsim.orchestrator.commands import COMMANDS  # noqa: E402
 from sblsim.orchestrator.commands.console import EXIT_USAGE, LOCKS, print_notes  # noqa: E402
 from sblsim.orchestrator.cosim.config import collected_notes  # noqa: E402
+from sblsim.orchestrator.io.version import installed_version  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):
@@ -31,18 +31,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"sblsim: error: {message}\n")
 
 
-def _version() -> str:
-    """The installed distribution's version (``pip show sblsim``)."""
-    try:
-        return version("sblsim")
-    except PackageNotFoundError:  # run from a checkout that was never installed
-        return "unknown (not installed)"
-
-
 def _parser() -> argparse.ArgumentParser:
     """``sblsim``'s parser: a subparser per command of :data:`~sblsim.orchestrator.commands.COMMANDS`."""
     p = _Parser(prog="sblsim", description="SBL acoustic underwater positioning co-simulation")
-    p.add_argument("--version", action="version", version=f"sblsim {_version()}")
+    p.add_argument("--version", action="version", version=f"sblsim {installed_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, command in COMMANDS.items():
         command.add_arguments(sub.add_parser(name, help=command.HELP))

@@ -67,7 +67,7 @@ def test_the_fast_tier_holds_no_slow_test_and_the_tiers_hold_every_test(tmp_path
     files = {test.split("::")[0] for test in markers}
     fast_files = {test.split("::")[0] for test in fast}
     assert files - fast_files == {"tests/orchestrator/test_ssp_hosts.py", "tests/test_packaging.py",
-                                  "tests/test_bench_detection.py"}
+                                  "tests/test_bench_detection.py", "tests/orchestrator/test_study_report_browser.py"}
 
 
 def test_ci_runs_the_readme_s_test_command_then_the_slow_tier():

@@ -19,8 +19,6 @@ subpackages (``package-dir`` in ``pyproject.toml``).
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
-
 __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
@@ -34,10 +32,9 @@ __all__ = [
 def __getattr__(name: str) -> object:
     """The public names, imported from :mod:`sblsim.orchestrator.api` when first used."""
     if name == "__version__":
-        try:
-            return version("sblsim")
-        except PackageNotFoundError:  # a checkout that was never installed
-            return "unknown"
+        from sblsim.orchestrator.io.version import installed_version
+
+        return installed_version()
     if name in __all__:
         from sblsim.orchestrator import api
 

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import jinja2
 
-import sblsim
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.manifest import refuse_foreign, write_manifest
 from sblsim.orchestrator.io.output import write_atomic
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.io.version import installed_version
 from sblsim.orchestrator.telemetry.report.context import page_context
 from sblsim.orchestrator.telemetry.report.daily import write_daily
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder, read_folder
@@ -63,7 +63,7 @@ def render(study: StudyFolder, generated: float | None = None) -> str:
                          f"({type(exc).__name__}: {str(exc)[:120]}); allowed: a study's folder (sblsim track "
                          "--out)") from None
     when = iso_utc([time.time() if generated is None else generated])[0][:19] + "Z"
-    return _environment().get_template(TEMPLATE).render(**values, generated=when, version=sblsim.__version__)
+    return _environment().get_template(TEMPLATE).render(**values, generated=when, version=installed_version())
 
 
 def report_bytes(folder: Path | str, label: str | None = None) -> bytes:
