@@ -19,6 +19,8 @@ subpackages (``package-dir`` in ``pyproject.toml``).
 
 from __future__ import annotations
 
+from sblsim.orchestrator.io.version import installed_version as _installed_version
+
 __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
@@ -32,9 +34,7 @@ __all__ = [
 def __getattr__(name: str) -> object:
     """The public names, imported from :mod:`sblsim.orchestrator.api` when first used."""
     if name == "__version__":
-        from sblsim.orchestrator.io.version import installed_version
-
-        return installed_version()
+        return _installed_version()
     if name in __all__:
         from sblsim.orchestrator import api
 
