@@ -48,6 +48,7 @@ def assert_same_run(tmp_path, scenario, items, seed=3, engine="local", fmu_dir=N
     return r
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", SCENARIOS)
 @pytest.mark.parametrize("system", SYSTEMS)
 def test_api_run_is_the_cli_run_for_every_scenario_and_system(tmp_path, scenario, system):
@@ -56,6 +57,7 @@ def test_api_run_is_the_cli_run_for_every_scenario_and_system(tmp_path, scenario
     assert r.config["platform"]["system"] == system and r.steps == 150
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("system", SYSTEMS)
 @pytest.mark.parametrize("receiver", RECEIVERS)
 def test_api_run_is_the_cli_run_for_every_receiver(tmp_path, system, receiver):
@@ -218,6 +220,7 @@ def test_numpy_integers_are_accepted_where_integers_are():
     pd.testing.assert_frame_equal(mine, sblsim.calibrate("box-in", replicates=2, set=short).replicates)
 
 
+@pytest.mark.slow
 def test_compare_map_and_budget_give_the_cli_tables(tmp_path):
     items = [SHORT]
     assert main(["compare", "semicircle", "--receivers", "ekf,lsq", "--replicates", "3", "--seed", "4",
@@ -242,6 +245,7 @@ def test_compare_map_and_budget_give_the_cli_tables(tmp_path):
     assert list(b.table["source"]) == list(cli["source"])
 
 
+@pytest.mark.slow
 def test_campaign_and_analyze_give_the_cli_results(tmp_path):
     import tomli_w
 
@@ -264,6 +268,7 @@ def test_campaign_and_analyze_give_the_cli_results(tmp_path):
     assert set(a.plot()) == {"pareto", "main_effects", "interactions", "residuals"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("survey, options", [("box-in", ["--replicates", "3"]), ("xie-2021-07-23", [])])
 def test_calibrate_is_the_cli_calibration(tmp_path, survey, options):
     """A simulated survey with replicates and a recorded one: the same solution, tables and files."""

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -43,6 +44,7 @@ def test_the_inverted_lbl_rows_are_their_estimators_figures():
     assert cells["rts"]["pcrb"] < ekf["pcrb"] and cells["robust"]["pcrb"] == cells["rts"]["pcrb"]
 
 
+@pytest.mark.slow
 def test_every_tracker_keeps_its_bound_with_multipath():
     """5 % of the arrivals 1 to 3 ms late, 5 seeds: every tracker's 2-D NEES in [1, 3] and RMS within 1.3 times its
     bound (the causal filters thanks to the single-ping fix's screening of a failing set: without it the EKF's NEES

@@ -16,6 +16,7 @@ import bench_modes  # noqa: E402
 import bench_tracking_scale  # noqa: E402
 
 
+@pytest.mark.slow
 def test_the_searches_count_their_hypotheses_and_their_nees_is_the_tracks():
     r = bench_modes.measure(100, seed=2)
     toa, _, truth, _, _ = bench_tracking_scale.simulate(100, 2, (bench_modes.SHARE, bench_modes.EXCESS_M))

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
@@ -17,6 +18,7 @@ import bench_telemetry_study  # noqa: E402
 from sblsim.orchestrator.telemetry.simulate import simulate_study  # noqa: E402
 
 
+@pytest.mark.slow
 def test_a_small_study_is_tracked_scored_and_bounded(tmp_path):
     r = bench_telemetry_study.run(6, 3, 0.15, 1, seed=2, workers=1, format="fathom", folder=tmp_path)
     assert r["tracked"] == 3 and r["receivers"] == 6 and r["set_aside"] >= 5  # the deck detections

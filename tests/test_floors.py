@@ -20,6 +20,7 @@ def floors():
     return module
 
 
+@pytest.mark.slow
 def test_every_module_is_on_a_floor_and_no_import_goes_up(floors):
     found = floors.modules()
     assert len(found) > 200 and "sblsim" in found and "sblsim.orchestrator.commands.run" in found
@@ -42,6 +43,7 @@ def test_the_floors_can_tell_a_room_and_an_import_up(floors, tmp_path):
                                                                    "sblsim.models.bound"]
 
 
+@pytest.mark.slow
 def test_the_page_s_table_of_the_floors_is_the_code_s(floors):
     page = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
     block = re.search(r"python docs/floors\.py[^\n]*\n```\n+```text\n(.*?)```", page, flags=re.S)

@@ -87,6 +87,7 @@ def test_campaign_on_a_full_disk_resumes_to_the_same_runs(small_disk, tmp_path):
     assert not [p.name for p in Path(disk / "c").iterdir() if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_export_log_on_a_full_disk_leaves_no_run_folder(small_disk, tmp_path):
     """The run's own files (on another disk) move into place only once its log is written: a log that does not fit
     leaves neither a partial log nor the run's folder, and the error says so."""
@@ -99,6 +100,7 @@ def test_export_log_on_a_full_disk_leaves_no_run_folder(small_disk, tmp_path):
     assert list(disk.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_export_log_into_a_new_folder_on_a_full_disk_leaves_no_folder(small_disk, tmp_path):
     """The folder made for the log goes with the failed write: nothing half-written is left on the disk."""
     disk, _ = small_disk

@@ -151,6 +151,7 @@ def test_hostile_input_is_one_line_exit_2_and_changes_nothing(outcomes, case):
     assert len(outside) == 1 and outside[0].endswith("-target") and untouched, outside
 
 
+@pytest.mark.slow
 def test_a_cast_within_the_limits_is_resampled(tmp_path):
     """The largest cast accepted (rows and bytes) is read and resampled, not refused."""
     from sblsim.models.acoustics.sound_speed import MAX_PROFILE_ROWS, read_cast_csv

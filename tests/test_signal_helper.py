@@ -55,6 +55,7 @@ def test_the_child_gets_default_sigint_and_sigterm_under_an_ignoring_parent(igno
     assert status == -sig  # killed by the signal (an uncaught KeyboardInterrupt ends by SIGINT too)
 
 
+@pytest.mark.slow
 def test_a_plainly_started_child_inherits_the_ignored_signals(ignoring):
     """What the helper exists for: without it the child ignores both and the signal does nothing."""
     proc = subprocess.Popen([sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True)

@@ -53,6 +53,7 @@ def collected_markers(tmp_path: Path) -> dict[str, list[str]]:
     return json.loads(target.read_text())
 
 
+@pytest.mark.slow
 def test_the_fast_tier_holds_no_slow_test_and_the_tiers_hold_every_test(tmp_path):
     markers = collected_markers(tmp_path)
     expression = marker_expression(readme_test_command())

@@ -134,6 +134,7 @@ def test_an_unwritable_cache_costs_only_the_compilation(logged, tmp_path, monkey
         assert compiled() == ["shared.c"]  # nothing kept: compiled each time
 
 
+@pytest.mark.slow
 def test_a_scenarios_fmu_compiles_only_its_model_record(logged, tmp_path):
     """An FMU with other compiled-in parameter defaults differs from the plain one by its model record: the
     generated math, the runtime and the FMI shell come from the cache."""

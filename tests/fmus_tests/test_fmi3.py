@@ -53,6 +53,7 @@ def fmu3_root(tmp_path_factory) -> Path:
     return root
 
 
+@pytest.mark.slow
 def test_fmpy_validates_every_fmi3_fmu_and_every_fmi2_variable_is_one_element(fmu3_root, fmu_dir):
     for name, model in MODELS.items():
         fmu3 = fmu_path(version_dir(fmu3_root, 3), name)
@@ -114,6 +115,7 @@ def _same(a: pd.DataFrame, b: pd.DataFrame) -> None:
     pd.testing.assert_frame_equal(a, b, check_exact=True)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, overrides", [
     ("semicircle", []), ("spiral", []), ("random", []), ("square", []), ("harbour", []), ("random-walk", []),
     ("semicircle", ["platform.system=lbl"]), ("semicircle", ["platform.system=usbl"]),

@@ -194,6 +194,7 @@ def np_error_range(position, beacon, arm, errors, clock):
     return np.linalg.norm(position - (beacon - gps - np.cross(attitude, arm))) + clock * offset
 
 
+@pytest.mark.slow
 def test_the_bound_with_error_states_equals_an_augmented_kalman_filter_and_the_plain_bound_without_them():
     """The ranging bound with error states (models/error_bound.py error_pcrb) against FilterPy's KalmanFilter with the
     augmented state (a Gauss-Markov GPS error, the clock's offset and drift, a constant attitude error, the offset's

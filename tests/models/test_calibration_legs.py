@@ -25,6 +25,7 @@ def ctd():
     return EigenRay(profile_table("ctd:NCL1", "", 15.0, 35.0), 1481.5, SURFACE_U)
 
 
+@pytest.mark.slow
 def test_eigenray_gradient_equals_finite_differences(ctd):
     points, x, j = _legs(np.random.default_rng(3))
     length, gradient = ctd.legs(points, x, j)

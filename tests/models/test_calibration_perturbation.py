@@ -203,6 +203,7 @@ def test_abic_tells_correlated_noise_from_white_and_the_correlated_sigma_holds()
     assert np.all(chosen["white"].sigma[0] < right.sigma[0])
 
 
+@pytest.mark.slow
 def test_eigenrays_in_spherical_layers_are_the_chord_in_still_water():
     """Isovelocity water in spherical shells: the ray is the straight chord between the radii R + U, whatever the
     flattening does to the flat profile; and its gradient is the chord's."""

@@ -467,7 +467,7 @@ def test_against_bellhop(name):
 
 
 @pytest.mark.parametrize("name, family, offset, check", [
-    ("strong", 0, 2e-6, "separatrix"),
+    pytest.param("strong", 0, 2e-6, "separatrix", marks=pytest.mark.slow),
     # the deep Munk profile's eigenrays take about 20 s: with the comparison they guard (slow, above)
     pytest.param("munk", 0, 12e-6, "Bellhop's times", marks=pytest.mark.slow),
     pytest.param("munk", 1, 25e-6, "Bellhop's times", marks=pytest.mark.slow)])
@@ -592,6 +592,7 @@ def test_the_eigenray_table_holds_the_exact_solve(name, depth, bounds, share):
         np.testing.assert_array_equal(g[~answered], w[~answered])
 
 
+@pytest.mark.slow
 def test_without_a_table_the_lookup_is_the_exact_solve():
     table = munk_table()
     rng = np.random.default_rng(3)

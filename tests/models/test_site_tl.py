@@ -128,6 +128,7 @@ def test_the_range_limit_is_the_multiply_reflected_paths(name):
     assert _compare(name)[0].min() > -0.1  # below it too: ours never louder than Bellhop beyond round-off
 
 
+@pytest.mark.slow
 def test_site_tl_comparison_can_fail():
     """The comparison fails for a loss 3.5 dB off everywhere (Munk), and for one 3.5 dB too small (rock)."""
     assert np.abs(_compare("munk", offset=3.5)[0]).max() > 3.0

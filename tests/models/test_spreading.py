@@ -351,6 +351,7 @@ def test_bellhop_incoherent_tl(name):
     assert worst <= 3.0
 
 
+@pytest.mark.slow
 def test_bellhop_comparison_can_fail():
     """The comparison fails for a loss 3.5 dB off everywhere (Munk)."""
     compared, _masked, worst, _median = _compare_with_bellhop("munk", offset=3.5)

@@ -5,6 +5,7 @@ squares reaches from the same start, and consistent with its covariance over 20 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.optimize import least_squares
 from scipy.optimize._numdiff import approx_derivative
 
@@ -70,6 +71,7 @@ def test_consistent_over_20_seeds_with_late_arrivals():
     assert 1.0 <= np.mean(nees) <= 3.0, np.mean(nees)
 
 
+@pytest.mark.slow
 def test_the_moved_test_holds_its_level_and_finds_a_walk():
     """:func:`moved`: for fixes independent about one point the ratio is √2 (successive differences Rayleigh with
     σ√2, the distances from the middle Rayleigh with σ: the ratio of their medians) and the test says moved in about
@@ -110,6 +112,7 @@ def test_the_bias_sensitivity_is_the_pooled_positions_central_difference():
     np.testing.assert_allclose(S.sum(axis=1), 0.0, atol=1e-6 * np.abs(S).max())
 
 
+@pytest.mark.slow
 def test_a_still_tags_covariance_with_the_survey_and_speed_terms_is_consistent_over_20_seeds():
     """Each seed: the receivers' surveyed positions off by N(0, 0.5 m) per axis and the sound speed off by
     N(0, 2 m/s), 200 pings of a still tag. The pooled covariance alone is far too small (its NEES against the true

@@ -122,6 +122,7 @@ def test_the_slow_covariance_is_the_refitted_fixes_sensitivity():
     np.testing.assert_allclose(got, A @ B @ A.T, rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_still_tags_in_changing_water_stay_still_where_the_order_test_says_moved():
     """20 simulated still tags, their fixes moved by a sound speed 1,480 ± 5 m/s over the day: the verdict finds
     no change in any (the share of rows it flags 0, at most the issue's 5 %), where the permutation test of the

@@ -174,6 +174,7 @@ def test_the_fixes_are_consistent_over_20_seeds_without_multipath():
     assert trusted >= 0.99 * 20 * 60
 
 
+@pytest.mark.slow
 def test_a_start_away_from_the_centroid_finds_the_global_minimum():
     """The fix is the lowest χ² over the starts: no start of a dense grid over the array (numpy's Gauss–Newton of the
     same arrivals from each) reaches a lower χ² than the fix's."""

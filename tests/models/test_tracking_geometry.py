@@ -76,6 +76,7 @@ def test_a_depth_reading_fixes_a_ping_of_dim_receivers_and_its_depth(count):
         assert figures[True][3] <= 0.3 and figures[False][3] >= 1.0, figures
 
 
+@pytest.mark.slow
 def test_a_track_with_depth_readings_has_the_depth_right_and_stays_consistent():
     """10 seeds of a tag in 3-D heard by half the receivers: with noisy readings (0.3 m) the smoother's height RMS
     is at most 0.6 of the one it estimates without them, its horizontal error no worse, its 3-D NEES in [1.5, 4.5]."""
@@ -120,6 +121,7 @@ def test_the_fixes_hold_the_receivers_survey_error():
     assert 1.5 <= means[1.0] <= 4.5 and means[None] >= 20.0, means
 
 
+@pytest.mark.slow
 def test_the_track_holds_the_receivers_survey_error():
     """12 arrays surveyed to 1 m: the robust smoother's 2-D NEES in [1.5, 3] with the survey error (a consider
     covariance: the same bias at every ping, which the smoother cannot average away), above 20 without."""

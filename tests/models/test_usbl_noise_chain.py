@@ -61,6 +61,7 @@ def receivers_covariance(p):
     return np.array(ca.Function("R", [x, b, att], [R])(p, np_rotation(PLATFORM) @ ARM, PLATFORM))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("off_vertical", [0.0, 45.0, 85.0])
 def test_r_is_the_covariance_of_the_channels_noise_chain(off_vertical):
     slant, bearing = 1000.0, math.radians(30.0)

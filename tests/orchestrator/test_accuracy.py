@@ -156,6 +156,7 @@ STUDY = {"study": {"name": "rx", "scenarios": ["semicircle"], "replicates": 3, "
                      {"name": "T", "key": "simulation.sampling_time", "low": 0.1, "high": 1.0}]}
 
 
+@pytest.mark.slow
 def test_a_campaign_with_the_receiver_as_a_factor_runs_and_analyses(tmp_path):
     study = load_study(STUDY)
     out = tmp_path / "camp"

@@ -205,6 +205,7 @@ def test_panel_counts_of_the_other_figures():
 # --------------------------------------------------------------------------- report
 
 
+@pytest.mark.slow
 def test_analyze_writes_csvs_figures_and_reports(tmp_path):
     src = _campaign(tmp_path / "campaign", replicates=3)
     out = analyze(src, out=tmp_path / "out")
@@ -260,6 +261,7 @@ def test_tables_against_pandas(tmp_path):
         frame["e_tot_mean"].mean())
 
 
+@pytest.mark.slow
 def test_unreplicated_campaign_states_lenth_in_report(tmp_path):
     src = _campaign(tmp_path / "c", replicates=1, scenarios=("random",))
     analysis = compute(src, order=4)
@@ -367,6 +369,7 @@ def _log_contrast(frame: pd.DataFrame, term: str, metric: str = "e_tot_rms") -> 
     return z[sign > 0].mean() - z[sign < 0].mean()
 
 
+@pytest.mark.slow
 def test_log_effects_are_contrasts_of_the_log_and_ratios_of_geometric_means(tmp_path):
     src = _multiplicative_campaign(tmp_path / "c")
     runs = pd.read_parquet(src / "runs.parquet")
@@ -388,6 +391,7 @@ def test_log_effects_are_contrasts_of_the_log_and_ratios_of_geometric_means(tmp_
     assert "the high level (1 s) is better" in md
 
 
+@pytest.mark.slow
 def test_diagnostics_flag_the_untransformed_fit_of_a_multiplicative_response(tmp_path, capsys):
     from sblsim.orchestrator.cli import main
 
@@ -425,6 +429,7 @@ def test_negative_fitted_values_of_a_positive_response_are_counted():
     assert fit(frame, FACTORS, "e_tot_rms", order=1, transform="log").diagnostics["share_fitted_nonpositive"] == 0
 
 
+@pytest.mark.slow
 def test_boxcox_lambda_is_the_maximum_likelihood_of_the_model_and_near_zero_for_a_log_normal_response():
     frame = _multiplicative()
     result = fit(frame, FACTORS, "e_tot_rms", order=2, transform="boxcox")
@@ -451,6 +456,7 @@ def test_boxcox_lambda_is_the_maximum_likelihood_of_the_model_and_near_zero_for_
     assert result.diagnostics["lambda"] == lam and result.response == "boxcox(e_tot_rms)"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("transform", ["log", "boxcox"])
 def test_transform_of_a_non_positive_metric_is_one_line(tmp_path, transform):
     src = _campaign(tmp_path / "c", replicates=2, scenarios=("semicircle",))

@@ -93,6 +93,7 @@ def _tampered(src, dst, ssd_edit=None, extra=()):
     return dst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind, message", [
     ("source climbs out", "is not a file inside the package"),
     ("absolute source", "is not a file inside the package"),

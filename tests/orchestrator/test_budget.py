@@ -90,6 +90,7 @@ def test_the_budget_adds_up_to_the_total():
     assert b.diverged == 0
 
 
+@pytest.mark.slow
 def test_a_lone_source_carries_the_whole_error_above_the_floor():
     """(b) Every source off but the range noise: it is total − floor, exactly; the remainder is 0."""
     items = [SHORT] + [o for name, (_, overrides) in SOURCES.items() if name not in ("range_noise", "sound_speed")
@@ -116,6 +117,7 @@ def test_a_source_the_system_does_not_have_contributes_nothing():
     assert status(b, "gps") == ON
 
 
+@pytest.mark.slow
 def test_a_static_diver_with_range_and_depth_noise_follows_the_fisher_information():
     """(d) The linear case in closed form.
 

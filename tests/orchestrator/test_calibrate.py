@@ -119,6 +119,7 @@ def _two_transponders(rng):
                    np.concatenate((np.zeros(120, int), np.ones(120, int))))
 
 
+@pytest.mark.slow
 def test_a_shuffled_log_gives_the_same_solution(tmp_path):
     """Two transponders replying to the same pings: shuffled rows are paired with their transponder by id."""
     replies = _two_transponders(np.random.default_rng(1))

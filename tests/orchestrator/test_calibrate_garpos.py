@@ -104,6 +104,7 @@ def test_the_reader_turns_the_offset_by_the_attitude_as_scipy_does(tmp_path):
     assert site.origin == {"lat_deg": 34.96166667, "lon_deg": 139.26333333, "height_m": 43.0}
 
 
+@pytest.mark.slow
 def test_a_garpos_survey_is_solved_by_the_command(tmp_path, capsys):
     truth, _ = _write(tmp_path / "g")
     out = tmp_path / "out"

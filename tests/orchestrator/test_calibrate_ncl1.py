@@ -39,6 +39,7 @@ def _shift(result) -> np.ndarray:
     return offsets[0]
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_named_keys(tmp_path, straight):
     assert main(["calibrate", "ncl1-2022-208", "--out", str(tmp_path / "b")]) == 0
     s = json.loads((tmp_path / "b" / "solution.json").read_text())
@@ -60,6 +61,7 @@ def test_the_command_writes_the_named_keys(tmp_path, straight):
     np.testing.assert_allclose(speeds, [t.sound_speed_mps for t in site.transponders], rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_the_straight_ray_residuals_are_the_readers_check_at_the_shift(straight):
     """The TWTT residual RMS against an independent model: the reader's straight-ray residuals at the shift."""
     log, site = read_ncl1()
@@ -69,6 +71,7 @@ def test_the_straight_ray_residuals_are_the_readers_check_at_the_shift(straight)
     assert straight.solution["twtt_residual_rms_s"] == pytest.approx(np.sqrt(np.mean(independent ** 2)), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_replies_are_paired_by_identity_a_shuffled_log_gives_the_same_solution(straight):
     survey = straight.survey
     f = survey.log.frame
@@ -104,6 +107,7 @@ def _objective(survey, legs, shift, weight):
     return float(np.sum(weight * v ** 2))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["straight", "ray"])
 def test_each_solution_is_a_weighted_least_squares_minimum(which, straight, ray):
     result = straight if which == "straight" else ray
@@ -120,6 +124,7 @@ def test_each_solution_is_a_weighted_least_squares_minimum(which, straight, ray)
         assert abs(plus - minus) < 1e-3 * rise
 
 
+@pytest.mark.slow
 def test_ray_and_straight_ray_against_each_other(straight, ray):
     """The eigenray solution: the same pings, a shift within a few sigma horizontally of the straight ray's; its
     vertical differs (the straight ray's harmonic mean starts 4 m down and ignores the bending)."""
@@ -132,6 +137,7 @@ def test_ray_and_straight_ray_against_each_other(straight, ray):
     assert "sound_speed_mps" not in ray.solution["transponders"][0]
 
 
+@pytest.mark.slow
 def test_the_eigenray_through_one_speed_is_the_straight_ray_at_that_speed(straight):
     """Isovelocity water on the survey's geometry: the ray leg's solution is the straight ray's."""
     survey = straight.survey

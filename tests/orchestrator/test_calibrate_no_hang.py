@@ -225,6 +225,7 @@ def test_the_moving_ocean_s_iterations_are_reported_and_change_nothing():
     assert seen == list(range(1, len(seen) + 1)) and len(seen) >= 3 + 1
 
 
+@pytest.mark.slow
 def test_a_study_far_from_its_bound_suggests_no_survey_sigma(tmp_path, capsys):
     """The default circle with a moving ocean solved: the NTD and the depth are one unknown on one circle, so the
     bound is thousands of metres while the replicates err by decimetres; a still ocean's study agrees."""

@@ -58,6 +58,7 @@ def test_the_running_solution_changes_no_number_of_the_solution(survey_a):
     assert a == b
 
 
+@pytest.mark.slow
 def test_the_nis_of_simulated_box_ins_is_chi_square():
     """20 box-in replicates (6020 replies): the mean NIS of the re-linearised filter lies within 3 sigma of 1 for
     a chi-square of one degree of freedom, sqrt(2 / n)."""
@@ -82,6 +83,7 @@ def test_the_nis_of_simulated_box_ins_is_chi_square():
     assert np.mean(wrong.nis) > 3.0
 
 
+@pytest.mark.slow
 def test_the_command_writes_running_csv_with_its_columns(tmp_path):
     assert main(["calibrate", "xie-2021-07-23", "--out", str(tmp_path / "a")]) == 0
     table = pd.read_csv(tmp_path / "a" / "running.csv")

@@ -152,6 +152,7 @@ def _folder(path, n=240, c=1500.0, shift=(0.2, -0.1, 0.05), rng=None):
     return truth, np.array(transducers)
 
 
+@pytest.mark.slow
 def test_the_reader_turns_the_offset_by_seagap_s_attitude(tmp_path):
     truth, transducers = _folder(tmp_path / "g")
     folder = read_seagap(tmp_path / "g")

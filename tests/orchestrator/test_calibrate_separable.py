@@ -152,6 +152,7 @@ def test_a_singular_matrix_names_the_pair_and_a_non_converged_solve_is_refused()
     assert "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_two_radii_with_noise_give_consistent_sigmas(tmp_path):
     """NEES of the 12 position unknowns' errors against their covariance, mean over 20 noise draws of 10 us: near
     the 3 per transponder of a consistent solve (the a posteriori variance of SeaGap's equal weights)."""

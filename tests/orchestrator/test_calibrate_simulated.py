@@ -112,6 +112,7 @@ def test_200_replicates_meet_the_bound_and_are_consistent(two_hundred):
     assert math.sqrt(np.mean(noisy["e_n_m"] ** 2 + noisy["e_e_m"] ** 2)) > 5 * rms_h
 
 
+@pytest.mark.slow
 def test_a_wrong_sound_speed_biases_the_depth_not_the_bound(two_hundred):
     _, table = two_hundred
     biased = run_simulated(load_simulated("box-in", ["survey.sound_speed_error_mps=3"]), 20)[1]
@@ -137,6 +138,7 @@ def test_a_wrong_sound_speed_puts_the_depth_where_the_documented_rule_says():
     assert abs(outcome.row["e_n_m"]) < 0.02 * rule and abs(outcome.row["e_e_m"]) < 0.02 * rule
 
 
+@pytest.mark.slow
 def test_the_survey_sigma_passed_on_is_the_replicates_rms(two_hundred):
     """One calibration's own sigma (what `sblsim calibrate box-in` passes on without replicates) is the RMS
     error per axis over replicates, within its sampling error."""

@@ -67,6 +67,7 @@ def _suggested_only_when_the_bound_agrees(solution, table):
     assert solution["bound_agreement"]["agrees"] == agrees and (solution["lbl_set"] is None) == (not agrees)
 
 
+@pytest.mark.slow
 def test_ignoring_the_ocean_sinks_the_transponder_by_c_times_the_mean_delay_over_twice_the_mean_cos2(replicates):
     _, (result, table) = replicates
     sim = load_simulated("box-in", OCEAN)

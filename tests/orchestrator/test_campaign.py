@@ -139,6 +139,7 @@ def test_same_runs_with_one_cell_per_chunk(reference, tmp_path):
     assert_same_runs(read_runs(out), ref.runs)
 
 
+@pytest.mark.slow
 def test_same_runs_on_a_dask_cluster(reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     study, ref = reference
@@ -208,6 +209,7 @@ def _resume(tmp_path: Path, out: Path, saved_chunks: int) -> None:
     assert not list((out / "chunks").glob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_resume_after_kill_gives_the_uninterrupted_result(kill_reference, tmp_path):
     proc, out, _, _ = _start_and_stop_part_way(tmp_path, signal.SIGKILL)
     assert proc.returncode == -signal.SIGKILL
@@ -220,6 +222,7 @@ def test_resume_after_kill_gives_the_uninterrupted_result(kill_reference, tmp_pa
     assert_same_runs(read_runs(out), kill_reference)
 
 
+@pytest.mark.slow
 def test_ctrl_c_exits_130_and_resume_gives_the_uninterrupted_result(kill_reference, tmp_path):
     proc, out, _, stderr = _start_and_stop_part_way(tmp_path, signal.SIGINT)
     assert proc.returncode == 130, stderr
@@ -253,6 +256,7 @@ def _finished(tmp_path: Path) -> tuple[Path, Path]:
     return study_file, out
 
 
+@pytest.mark.slow
 def test_resume_recomputes_damaged_foreign_and_missing_chunks(kill_reference, tmp_path):
     study_file, out = _finished(tmp_path)
     files = chunk_files(out)
@@ -272,6 +276,7 @@ def test_resume_recomputes_damaged_foreign_and_missing_chunks(kill_reference, tm
     assert_same_runs(read_runs(out), kill_reference)
 
 
+@pytest.mark.slow
 def test_resume_without_a_manifest_checks_the_chunks_by_content(kill_reference, tmp_path):
     study_file, out = _finished(tmp_path)
     files = chunk_files(out)
@@ -289,6 +294,7 @@ def test_resume_without_a_manifest_checks_the_chunks_by_content(kill_reference, 
     assert set(json.loads((out / "manifest.json").read_text())) == {f.stem for f in files} | {"_plan"}
 
 
+@pytest.mark.slow
 def test_a_damaged_study_file_stops_resume_with_one_line_and_deleting_it_recovers(kill_reference, tmp_path):
     study_file, out = _finished(tmp_path)
     (out / "study.toml").write_text("[study\nname = ")
@@ -306,6 +312,7 @@ def test_a_damaged_study_file_stops_resume_with_one_line_and_deleting_it_recover
     assert_same_runs(read_runs(out), kill_reference)
 
 
+@pytest.mark.slow
 def test_a_chunk_of_another_study_with_the_same_cells_is_recomputed(kill_reference, tmp_path):
     study_file, out = _finished(tmp_path)
     other = {**KILL_TABLE, "study": {**KILL_TABLE["study"], "seed": 6}}  # same plan, other seed
@@ -341,6 +348,7 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="needs /proc to find the worker processes")
 def test_workers_do_not_outlive_a_killed_campaign(tmp_path):
     table = {**KILL_TABLE, "study": {**KILL_TABLE["study"], "replicates": 40, "set": ["simulation.duration=200"]}}
@@ -368,6 +376,7 @@ def test_workers_do_not_outlive_a_killed_campaign(tmp_path):
             proc.wait()
 
 
+@pytest.mark.slow
 def test_resume_of_a_finished_campaign_does_nothing(tmp_path):
     study = load_study(study_table(scenarios=["semicircle"]))
     out = tmp_path / "done"

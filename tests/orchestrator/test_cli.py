@@ -80,6 +80,7 @@ def test_run_writes_all_outputs(short_run):
     assert [p.name for p in base.iterdir() if p.name.startswith(".")] == []
 
 
+@pytest.mark.slow
 def test_summary_keys_and_values(short_run):
     _, out, _ = short_run
     s = json.loads((out / "summary.json").read_text())

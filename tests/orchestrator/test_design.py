@@ -132,6 +132,7 @@ def test_the_written_scenario_maps_to_the_designs_prediction_and_runs(worked, tm
             (n, e, d)
 
 
+@pytest.mark.slow
 def test_the_search_at_the_site_is_the_maps_evaluation_at_the_proposed_design(worked):
     """The proposed design's numbers come from the map itself; the search's own evaluation of the same layout (the
     compiled layout function, the site's detection tabulated every 5 m) agrees with it within 1e-3."""
@@ -243,6 +244,7 @@ def test_a_transponder_in_the_shadow_adds_nothing_where_it_is_not_heard():
     assert rms == pytest.approx(mapped, rel=0.15), (rms, mapped)
 
 
+@pytest.mark.slow
 def test_reflected_ranges_that_do_not_fix_the_position_add_nothing():
     """The reflected ranges' spread (maps.range_echo_spread) at a point where one range alone is heard (with the
     depth it cannot fix the position: the map is infinite there) is 0, not an error; where all four are heard by
@@ -255,6 +257,7 @@ def test_reflected_ranges_that_do_not_fix_the_position_add_nothing():
     assert 0.0 < horizontal[1] <= total[1]
 
 
+@pytest.mark.slow
 def test_a_map_s_reflected_ranges_are_its_points_own():
     """On a grid (its reflected ranges' offsets computed at some distances and interpolated in between) the 3 m SBL
     at lbl-field, where only bottom reflections are heard beyond about 2.2 km, maps each point as the point alone
@@ -277,6 +280,7 @@ def test_a_map_s_reflected_ranges_are_its_points_own():
     assert checked == 4
 
 
+@pytest.mark.slow
 def test_the_api_takes_the_problem_as_keyword_sections_and_refuses_bad_keys(tmp_path):
     result = sblsim.design(None, **{k: v for k, v in SMALL.items()}, workers=1)
     assert result.out is None and result.designs[0]["system"] == "lbl"
@@ -295,6 +299,7 @@ def test_the_api_takes_the_problem_as_keyword_sections_and_refuses_bad_keys(tmp_
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 def test_a_prescription_none_meets_is_said_in_one_line_with_the_best_found(tmp_path, capsys):
     """No layout of 3 to 6 transponders gives 1 cm over the small work area: the command says so in its last line
     with the best it found (the most coverage), exits 0 and writes the same files."""
@@ -361,6 +366,7 @@ def test_every_design_key_and_grade_is_documented_as_it_is_declared():
         (kind, grade): setting for kind, named in GRADES.items() for grade, setting in named.items()}
 
 
+@pytest.mark.slow
 def test_the_path_check_is_the_scenarios_receiver_compared_on_that_path(tmp_path):
     """``monte_carlo.path``: the scenario's receiver on a straight path through the work area's centre; its row is
     what ``sblsim.compare`` gives for the design's own scenario file on the same path."""
@@ -393,6 +399,7 @@ def test_the_update_interval_bounds_the_cycle():
 # --------------------------------------------------------------------------- a design never meets what it does not
 
 
+@pytest.mark.slow
 def test_areas_to_avoid_that_leave_no_room_are_refused_and_every_proposed_transponder_is_outside_them():
     """An area to avoid covering the whole seafloor region is refused in one line (it gave "meets" with every
     transponder inside it); one covering the region's northern half leaves room, and every layout searched stands
@@ -518,6 +525,7 @@ def test_among_designs_that_do_not_meet_the_cheapest_of_the_nearest_is_first():
     assert [d.candidate.cost for d in ranked(designs[:2])] == [2.0, 3.0]
 
 
+@pytest.mark.slow
 def test_the_simulated_availability_is_the_share_of_cycles_whose_own_packets_give_a_fix(tmp_path):
     """Five transponders, 40 % of the packets lost: a cycle's own packets give a fix (three ranges) with the
     binomial sum over k >= 3 of C(5, k) 0.6^k 0.4^(5-k) = 0.68256; the static runs' fresh fixes agree within four
@@ -590,6 +598,7 @@ def test_a_design_failing_on_availability_says_so(tmp_path, capsys):
 # --------------------------------------------------------------------------- bounded effort
 
 
+@pytest.mark.slow
 def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_before_any_work(tmp_path):
     """Every key of a design's effort at its largest: the estimate, one line, exit 2, nothing written;
     ``--max-minutes`` cannot allow years; a value outside its range is refused. The estimate is days of work: a

@@ -68,6 +68,7 @@ def ilbl(tmp_path_factory):
     return sblsim.design(None, **ILBL, out=tmp_path_factory.mktemp("kept") / "ilbl")
 
 
+@pytest.mark.slow
 def test_an_lbl_design_keeps_the_transponders_in_place_and_pays_only_for_those_added(lbl):
     """Every LBL layout searched holds the two transponders in place first, exactly; the counts start at 3 (the
     fewest allowed, above the two in place); each cost is 1.5 per transponder added; design.json marks the two, and

@@ -98,6 +98,7 @@ def test_the_static_fixes_take_the_late_arrivals_as_the_mixtures_variance_says()
         assert row["simulated_drms_m"] == pytest.approx(factor * row["predicted_drms_m"], rel=0.05), (pct, row)
 
 
+@pytest.mark.slow
 def test_the_walk_with_five_percent_multipath_is_tracked_within_the_measured_band(monkeypatch):
     """The walk of the L lake (seven receivers, 250 pings, seed 0), 5 % of its arrivals late by 2 m on average
     (13 σ of 0.148 m): the same walk and detections as at 0 % (the multipath's own stream), so the least-squares

@@ -139,6 +139,7 @@ def test_receiver_curves_apply_by_column():
     assert "1 receiver(s)" in curves.describe()
 
 
+@pytest.mark.slow
 def test_without_per_receiver_curves_the_design_is_the_site_wide_one(tmp_path):
     """No ``detection.per_receiver``: design.json is the same as before the key (the site's curve for every
     receiver) — the same as with every receiver in place given the site's own curve."""

@@ -147,6 +147,7 @@ SMALL = {
 }
 
 
+@pytest.mark.slow
 def test_the_design_reports_the_synchronised_track_beside_the_true_clocks(tmp_path):
     """design.json's path row holds the synchronised track's keys and the summary line says it; with
     ``monte_carlo.sync_clocks = false`` every other figure of the design is the same, bit for bit (added, not

@@ -170,6 +170,7 @@ def test_a_design_with_a_stable_tag_records_it_and_tracks_its_walk(tmp_path):
     assert 1.5 <= path["tracked_nees"] <= 4.5 and path["tracked_ratio"] <= 3.0, path
 
 
+@pytest.mark.slow
 def test_a_design_on_the_sites_snr_model_runs(tmp_path):
     """No range test: the tag's power class (136 dB re 1 uPa at 1 m, a quiet 69 kHz tag: Bowles, Denes & Shane
     2010 measured 129-137 dB for one maker's) in the sea. The design's curve is the SNR model's, its 50 % distance

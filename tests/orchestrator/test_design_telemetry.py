@@ -91,6 +91,7 @@ def test_the_ilbl_designs_predicted_drms_is_an_independent_fisher_computation():
     assert predicted["drms_p95_m"] == pytest.approx(np.percentile(fixed, 95, method="higher"), rel=1e-6)
 
 
+@pytest.mark.slow
 def test_receivers_are_never_outside_the_water_and_the_sync_graph_is_connected():
     """Every count searched (``search.pareto``) in a concave lake, with a margin from the shore: each receiver
     inside the lake by an independent ray casting, at least the margin from every edge; the design that meets
@@ -249,6 +250,7 @@ def test_the_walk_of_the_path_stays_in_the_water():
     assert np.median(np.linalg.norm(np.diff(positions, axis=0), axis=1)) == pytest.approx(9.0)
 
 
+@pytest.mark.slow
 def test_the_telemetry_design_writes_its_outputs(tmp_path):
     result = sblsim.design(None, **_problem(monte_carlo={"path": True}), out=tmp_path / "d")
     document = json.loads((tmp_path / "d" / "design.json").read_text())
@@ -268,6 +270,7 @@ def test_the_telemetry_design_writes_its_outputs(tmp_path):
     assert first["lat"].isna().all()
 
 
+@pytest.mark.slow
 def test_a_design_placed_by_its_origin_gives_its_receivers_lat_lon(tmp_path):
     """``site.area.origin``: the receivers' lat, lon are the origin's UTM coordinates plus (east, north), back
     through pyproj (computed here with pyproj's own transformer)."""
@@ -312,6 +315,7 @@ def test_the_built_in_lake_hald_array_is_lake_halds_stated_case():
     assert sections["candidates"]["systems"] == ["ilbl"] and sections["work_area"]["shape"] == "site"
 
 
+@pytest.mark.slow
 def test_the_path_is_tracked_as_the_replay_tracks_a_recorded_tag(tmp_path):
     """``track_path`` (the design's confirmation by the tracker) on 300 pings of a random burst interval U(20, 40) s
     among 6 receivers, each heard with probability 0.8, the tag circling inside the array: its RMS equals

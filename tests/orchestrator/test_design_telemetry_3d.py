@@ -152,6 +152,7 @@ def test_a_planar_array_has_no_information_about_a_depth_at_its_own():
     assert np.isfinite(tm.fix_drms(at, flat, 0.148, depth_sigma_m=0.3)[0])  # a sensor gives it
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sensor", [True, False])
 def test_the_3d_monte_carlo_agrees_with_the_prediction(sensor):
     """Simulated pings at the worst and median points fixed by 3-D least squares (with the sensor's readings where
@@ -171,6 +172,7 @@ def test_the_3d_monte_carlo_agrees_with_the_prediction(sensor):
         assert abs(row["simulated_yield"] - row["predicted_yield"]) <= 0.05, row
 
 
+@pytest.mark.slow
 def test_the_3d_walk_is_tracked_in_3d():
     """The walk at the work area's depths, fixed in 3-D and tracked by the replay tracker with the sensor's
     readings: a finite track, its error small against the pond, the simulated DRMS near the predicted."""

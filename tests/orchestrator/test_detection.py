@@ -99,6 +99,7 @@ def test_the_usbl_angle_noise_at_the_reference_snr_is_the_configured_one_and_dou
     assert spreads[1] == pytest.approx(2.0, rel=0.12)
 
 
+@pytest.mark.slow
 def test_detection_probability_falls_with_range_and_is_zero_in_a_shadow():
     """A downward-refracting profile (1500 → 1480 m/s over 1000 m) without boundaries, a source at 50 m and a
     receiver at 300 m: P_d of the direct eigenray never rises with range, and beyond the shadow edge (no

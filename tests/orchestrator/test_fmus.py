@@ -250,6 +250,7 @@ def _own_handles_runs(fmu_dir, out, runs, duration):
                           capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_fmu_engine_own_handles_full_semicircle(fmu_dir, tmp_path):
     """``run(cfg, 'fmu', fmu_dir=...)`` (handles made and closed by run) equals the local engine."""
     proc = _own_handles_runs(fmu_dir, tmp_path, 1, 0)  # duration 0: one full pass
@@ -258,6 +259,7 @@ def test_fmu_engine_own_handles_full_semicircle(fmu_dir, tmp_path):
     assert_same_frames(local, pd.read_parquet(tmp_path / "fmu0.parquet"))
 
 
+@pytest.mark.slow
 def test_fmu_engine_runs_twice_in_one_process(fmu_dir, tmp_path):
     """Two ``run(cfg, 'fmu', fmu_dir=...)`` calls in one process give the same result."""
     proc = _own_handles_runs(fmu_dir, tmp_path, 2, 2)

@@ -227,6 +227,7 @@ def test_compare_map_budget_and_campaign_take_the_inverted_lbl(tmp_path, monkeyp
     assert SYSTEMS["ilbl"].designed is False  # sblsim design does not propose it
 
 
+@pytest.mark.slow
 def test_an_exported_log_replays_to_the_run(tmp_path, monkeypatch):
     """``run --export-log`` of an inverted LBL (its rows at each ping's nominal epoch, arrivals before it and negative
     pseudo-ranges where a ping left early) replays through ``sblsim replay`` to the run's estimate at every step

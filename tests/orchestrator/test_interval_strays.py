@@ -127,6 +127,7 @@ def test_a_tags_table_counts_the_set_aside_rows_apart(tmp_path, record):
     assert row["flagged"] == int((track["quality"][estimated] == "flagged").sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [5, 6, 7])
 def test_a_stable_interval_s_strays_are_set_aside_too(tmp_path, capsys, seed):
     """A stable-interval tag (``--ping-type sbi``, 30 s, 2 % of its pings missed at every receiver) with 3 % stray

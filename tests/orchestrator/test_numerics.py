@@ -52,6 +52,7 @@ def test_extreme_allowed_values_stay_finite_and_positive_definite(receiver, sigm
     assert not result.metrics["diverged"].any()
 
 
+@pytest.mark.slow
 def test_a_planted_divergence_is_flagged(tmp_path, capsys):
     args = ["run", "semicircle", "--set", "simulation.duration=30", "--set", "receiver.q_horizontal=0",
             "--set", "receiver.q_vertical=0", "--set", "receiver.p0_position=0.001", "--set", "receiver.x0_x=500"]
@@ -76,6 +77,7 @@ def test_summary_json_is_strict_json(tmp_path):
     assert summary["instr_e_tot_mean"] is None and summary["gated_pct"] is None
 
 
+@pytest.mark.slow
 def test_force_replaces_an_earlier_run_and_stale_staging_folders_are_removed(tmp_path, capsys):
     out = tmp_path / "run"
     args = ["run", "semicircle", "--set", "simulation.duration=2", "--out", str(out)]
@@ -93,6 +95,7 @@ def test_force_replaces_an_earlier_run_and_stale_staging_folders_are_removed(tmp
     assert not dead.exists() and alive.exists()
 
 
+@pytest.mark.slow
 def test_a_receiver_that_never_made_a_fix_is_flagged(tmp_path, capsys):
     """Every packet lost: lsq has no estimate (never its starting guess); summary.json counts no update, its error
     metrics have no value and the CLI says so."""
@@ -111,6 +114,7 @@ def test_a_receiver_that_never_made_a_fix_is_flagged(tmp_path, capsys):
     assert json.loads((good / "summary.json").read_text())["updates"] > 0
 
 
+@pytest.mark.slow
 def test_a_diver_beyond_the_geometry_is_flagged_not_diverged(tmp_path, capsys):
     """A diver 10 km from a 6 m array: the real accuracy there, not a divergence; flagged and warned. (Its ranges
     travel 6.7 s: a sampling time of 1 s holds them in flight.)"""

@@ -94,6 +94,7 @@ def test_the_bending_is_a_linear_gradients_arc():
         assert abs(bending) > 1e-6 or x < 5  # the ray bends: the measured angle is not the chord's
 
 
+@pytest.mark.slow
 def test_the_bending_turns_a_deep_casts_eigenrays_to_the_chord():
     """The direct eigenray from a transceiver near the surface to a diver 50-1200 m deep through the NCL1 cast
     (solved by the eigenray families, another solver): its launch angle plus the bending is the chord's elevation

@@ -62,6 +62,7 @@ def _read(out, name: str) -> pd.DataFrame:
     return pd.read_csv(out / name, dtype={"tag": str, "receiver": str})
 
 
+@pytest.mark.slow
 def test_each_reference_tag_is_scored_against_its_known_position(study):
     sim, refs, outcome, out = study
     scored = _read(out, "reference_tags.csv")
@@ -97,6 +98,7 @@ def test_each_reference_tag_is_scored_against_its_known_position(study):
     assert list(rows.loc[refs, "in_sync"]) == [False, False, True]
 
 
+@pytest.mark.slow
 def test_the_pooled_figures_and_the_console_line(study):
     sim, refs, outcome, out = study
     scored = _read(out, "reference_tags.csv")
@@ -112,6 +114,7 @@ def test_the_pooled_figures_and_the_console_line(study):
     assert f"NEES {np.mean(rows['nees']):.2g}" in said[0]
 
 
+@pytest.mark.slow
 def test_the_sync_tags_left_out_are_the_synchronisations_own(study):
     """The sync tags' leave-one-out taken from the synchronisation's sync_tags.csv as it is, pooled as it pools it."""
     sim, refs, outcome, out = study
@@ -129,6 +132,7 @@ def test_the_sync_tags_left_out_are_the_synchronisations_own(study):
     assert pooled["nees_mean_inside"] == pytest.approx(inside.mean() if len(inside) else None)
 
 
+@pytest.mark.slow
 def test_a_given_synchronisations_sync_tags_are_read_as_hostile_cells(study, tmp_path):
     """``--sync DIR``: its folder's sync_tags.csv read back (each cell checked) gives the same rows."""
     sim, refs, outcome, out = study
@@ -145,6 +149,7 @@ def test_a_given_synchronisations_sync_tags_are_read_as_hostile_cells(study, tmp
         given_sync_tags(tmp_path)
 
 
+@pytest.mark.slow
 def test_a_reference_tag_far_from_its_position_is_said(study):
     """The same track scored against a position 30 m off: beyond its σ, and a warning says it."""
     sim, refs, outcome, out = study

@@ -143,6 +143,7 @@ def test_a_relative_model_beside_the_log_is_not_imported(exported, folders, suff
     assert seen == [] and not (work / "CANARY").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 @pytest.mark.parametrize("switch", [["--receiver", "ekf"], ["--set", "receiver=ekf-seq"]], ids=["receiver", "set"])
 def test_switching_receivers_does_not_import_the_logs(exported, folders, suffix, switch):
@@ -168,6 +169,7 @@ def test_a_log_naming_an_fmu_is_refused_and_never_loaded(exported, folders, suff
     assert seen == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_files_a_log_names_are_not_opened(exported, folders, suffix):
     work, outside = folders
@@ -187,6 +189,7 @@ def test_files_a_log_names_are_not_opened(exported, folders, suffix):
     assert config["target"]["trajectory_file"] == "" and config["acoustics"]["sound_speed_profile"] == "constant"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_a_logs_receiver_naming_a_private_csv_is_refused_unopened(exported, folders, suffix):
     """``receiver.sound_speed_profile`` is a file key as the channel's is: a log naming a CSV there is refused in one
@@ -209,6 +212,7 @@ def test_a_logs_receiver_naming_a_private_csv_is_refused_unopened(exported, fold
     assert tomllib.loads((work / "r" / "config.toml").read_text())["receiver"]["sound_speed_profile"] == "assumed"
 
 
+@pytest.mark.slow
 def test_controls_the_hook_sees_a_model_and_a_file_given_on_the_command_line(exported, folders):
     """What the user names is used, and said: the model is imported (the canary) and its file opened, the
     trajectory file read; so the empty records above are not the hook's blindness."""
@@ -226,6 +230,7 @@ def test_controls_the_hook_sees_a_model_and_a_file_given_on_the_command_line(exp
     assert ["open", str((outside / "track.csv").resolve())] in seen
 
 
+@pytest.mark.slow
 def test_the_receiver_a_user_names_is_said(exported, tmp_path):
     model = Path(__file__).resolve().parents[2] / "docs" / "examples" / "constant_position.py"
     proc = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "replay", str(exported[".csv"]),

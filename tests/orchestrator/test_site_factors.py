@@ -120,6 +120,7 @@ def test_each_cell_receives_the_packets_the_sonar_equation_predicts(campaign, ex
         assert abs(got - want[cell]) <= tolerance, (cell, study.cell_overrides(cell), got, want[cell])
 
 
+@pytest.mark.slow
 def test_the_effects_have_the_physical_sign(campaign, expected):
     """A louder source raises the share of packets received, a rougher sea (Wenz: more wind noise) lowers it; the
     analysis's effects are the contrasts of the cell means and its report calls the louder source better."""
@@ -145,6 +146,7 @@ def test_the_effects_have_the_physical_sign(campaign, expected):
     assert f"best cell: {best} (highest mean detected_pct = " in report
 
 
+@pytest.mark.slow
 def test_a_campaign_row_is_the_run_of_its_levels(campaign):
     """A row of a batch of several cells equals the single run of its levels (text levels, and a sea state that
     the channel takes from the platform's key)."""

@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from sblsim.orchestrator.tracks.track import track
 from sblsim.orchestrator.tracks.variants import write_toa
@@ -42,6 +43,7 @@ def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = N
     return tmp_path / "toa.txt", tmp_path / "receivers.csv", places
 
 
+@pytest.mark.slow
 def test_still_tags_in_changing_water_are_not_flagged_and_their_sigma_is_honest(tmp_path):
     """20 still tags, the sound speed calibrated from their pings: at most 5 % of the rows flagged (none
     ``tag_moved``), and the mean 2-D NEES of the place against the truth with the covariance reported (its own and

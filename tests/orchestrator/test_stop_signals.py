@@ -97,6 +97,7 @@ def test_a_signal_handled_inside_a_casadi_call_is_the_stop(tmp_path, name):
     assert err.splitlines() == ["sblsim: interrupted"], err
 
 
+@pytest.mark.slow
 def test_signals_sent_while_casadi_calls_run_end_the_command(tmp_path):
     """A loop of casadi calls (the box-in's lever arm, the issue's traceback), signalled from outside at different
     moments of its calls (three children at once): each ends within 5 s with 128 + the signal and one line, whatever

@@ -48,6 +48,7 @@ def _truth_at(sim, result, tag: str, epoch: np.ndarray) -> np.ndarray:
     return np.c_[np.interp(epoch, on_reference, truth["x"]), np.interp(epoch, on_reference, truth["y"])]
 
 
+@pytest.mark.slow
 def test_every_tag_tracked_within_its_own_uncertainty(study):
     sim, _, result, _ = study
     tags = result.tags
@@ -62,6 +63,7 @@ def test_every_tag_tracked_within_its_own_uncertainty(study):
         assert np.sqrt(np.mean(error**2)) < 0.5 and (rows["quality"] == "flagged").mean() < 0.05, tag
 
 
+@pytest.mark.slow
 def test_the_detections_outside_a_deployment_are_set_aside_and_counted(study):
     sim, _, result, _ = study
     aside = result.summary["detections"]["reasons"]
@@ -75,6 +77,7 @@ def test_the_detections_outside_a_deployment_are_set_aside_and_counted(study):
                                                                                            f"{moved}.2"]
 
 
+@pytest.mark.slow
 def test_tracks_csv_is_the_tags_own_tracks_with_utc_times_and_lat_lon(study):
     sim, files, result, folder = study
     out = folder / "out"
@@ -104,6 +107,7 @@ def test_tracks_csv_is_the_tags_own_tracks_with_utc_times_and_lat_lon(study):
         assert np.allclose(lines[tag], np.c_[ok["lon"], ok["lat"]], rtol=0, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_the_reference_receivers_arrivals_are_its_logged_utc_times(study):
     """At the reference receiver (offset 0 by definition) a tag's times of arrival plus the matrix's origin are the
     times the export logged, to the microsecond the export writes."""
@@ -122,6 +126,7 @@ def test_the_reference_receivers_arrivals_are_its_logged_utc_times(study):
         assert len(heard) and np.max(np.min(np.abs(heard[:, None] - times[None]), axis=1)) < 2e-6
 
 
+@pytest.mark.slow
 def test_the_same_tracks_from_the_fathom_export(study, tmp_path):
     _, files, result, folder = study
     other = sblsim.track(folder / "fathom" / "detections.csv", receivers=files["deployments"], tags=files["tags"],
@@ -131,6 +136,7 @@ def test_the_same_tracks_from_the_fathom_export(study, tmp_path):
     pd.testing.assert_frame_equal(other.tracks, result.tracks, check_exact=False, rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_tag_never_detected_is_a_row_saying_so(study):
     _, files, _, _ = study
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
@@ -143,6 +149,7 @@ def test_a_tag_never_detected_is_a_row_saying_so(study):
     assert "never detected" in rows.loc["A69-1602-9999", "reason"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra, edit, found", [
     ([], lambda d: d.assign(deploy_lat=95.0), "column deploy_lat: '95"),
     (["--format", "fathom"], None, "starts with the line VEMCO DATA LOG"),
@@ -166,6 +173,7 @@ def test_bad_input_is_refused_in_one_line_and_nothing_written(study, tmp_path, c
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_the_command_line_says_what_it_did(study, tmp_path, capsys):
     from sblsim.orchestrator.cli import main
 
@@ -227,6 +235,7 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
         assert np.allclose(read.toa, toa, equal_nan=True)
 
 
+@pytest.mark.slow
 def test_a_sheet_s_interval_the_detections_contradict_is_said_and_taken_with_force_interval(study, tmp_path):
     """The rbi tag (100-200 s) stated as 300-600 s on the sheet: its row of tags.csv refused naming the interval its
     detections show (no silent drop of its pings as echoes); with ``force_interval`` (``--force-interval``) it is

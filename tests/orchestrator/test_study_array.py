@@ -158,6 +158,7 @@ def twice(tmp_path_factory):
     return sim, network, runs, folder
 
 
+@pytest.mark.slow
 def test_a_network_sheet_changes_no_track(twice):
     sim, network, runs, _ = twice
     own, more = runs["own"], runs["network"]
@@ -171,6 +172,7 @@ def test_a_network_sheet_changes_no_track(twice):
     assert len(more.deployments.table) == len(own.deployments.table) == len(sim.deployments)
 
 
+@pytest.mark.slow
 def test_the_network_s_other_deployments_are_listed_as_not_used(twice):
     sim, network, runs, folder = twice
     written = pd.read_csv(folder / "network" / "receivers.csv", dtype={"serial": str, "station": str},
@@ -190,6 +192,7 @@ def test_the_network_s_other_deployments_are_listed_as_not_used(twice):
     assert len(said) == 1 and "152 not used (150 serial never detected, 2 outside the detections' time span)" in said[0]
 
 
+@pytest.mark.slow
 def test_sblsim_sync_takes_the_same_array(twice):
     """``sblsim sync`` on the network's sheet synchronises the study's own deployments only, as the study does: the
     same clocks as with the study's own sheet, the others said in a note."""

@@ -72,6 +72,7 @@ def runs(tmp_path_factory):
     return _run(folder / "clean", False), _run(folder / "mistakes", True)
 
 
+@pytest.mark.slow
 def test_every_tag_tracked_and_the_reset_named_in_one_line(runs):
     _, (_, result, victim) = runs
     assert (result.tags["status"] == "tracked").all() and len(result.tags) == 3

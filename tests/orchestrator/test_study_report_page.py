@@ -384,6 +384,7 @@ def test_a_study_whose_tags_are_all_refused_has_its_page(refused):
     assert daily["detections"].sum() == pd.read_csv(out / "receivers.csv")["detections"].sum()
 
 
+@pytest.mark.slow
 def test_sblsim_report_writes_the_page_again_and_refuses_in_one_line(folder, tmp_path, capsys):
     assert main(["report", str(folder)]) == 0
     assert capsys.readouterr().out.startswith(f"wrote {folder / REPORT_FILE}")

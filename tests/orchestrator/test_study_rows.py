@@ -35,6 +35,7 @@ def forced(tmp_path_factory):
     return sim, files, main, folder, sheet.loc[rbi, "transmitter"]
 
 
+@pytest.mark.slow
 def test_every_ping_is_counted_once_and_the_console_says_counts(forced, capsys):
     sim, files, main, folder, rbi = forced
     code = main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",

@@ -55,6 +55,7 @@ def _tag_summary(out, result) -> dict:
     return json.loads((out / folder / "summary.json").read_text())
 
 
+@pytest.mark.slow
 def test_water_depth_and_temperature_file_reach_the_tracker(study, capsys):
     """``sblsim track --water-depth 30 --temperature-file CSV --salinity 0``: the tag's depth held at mid-water,
     15 ± 30/√12 m (a uniform over the column), and its sound speed TEOS-10's at 12 °C in fresh water (gsw here,

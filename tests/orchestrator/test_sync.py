@@ -204,6 +204,7 @@ def test_a_small_array_s_outputs_are_written_and_read_back(tmp_path):
     assert (np.abs(error[others]) <= 3 * o["offset_start_sigma_s"].to_numpy()[others]).mean() >= 0.9
 
 
+@pytest.mark.slow
 def test_the_positions_refined_on_a_small_array(tmp_path, capsys):
     """``--refine-positions`` on 8 simulated receivers over 4 h whose table is 2 m off per axis: positions.csv
     written, the receivers the sync tags determine refined (a corner one, R6, determined by its own tag alone, keeps

@@ -83,6 +83,7 @@ def _sync(folder: Path, capsys) -> list[str]:
     return [line for line in capsys.readouterr().err.splitlines() if "warning" in line]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("size", [-20.0, -86400.0])
 def test_a_reset_in_the_files_order_split_said_and_read_back(tmp_path, capsys, size):
     """R2's times after 2 h shifted by −20 s or −1 day, its rows in its logging order: one line names R2, the line of

@@ -62,6 +62,7 @@ def _cut(files, seconds: np.ndarray, end: float, folder, name: str):
     return folder / name
 
 
+@pytest.mark.slow
 def test_a_record_ending_just_into_a_bin_keeps_each_receivers_noise(record, tmp_path):
     """Cut a second after the first emission heard in a bin (its arrivals all in), and 10 s before the bin: each
     receiver's noise the same within 10 %, their median within 0.8-1.25 of the drawn noise (each receiver's alone

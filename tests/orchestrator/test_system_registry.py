@@ -125,6 +125,7 @@ def _string_literals(path: Path) -> set[str]:
             if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs}
 
 
+@pytest.mark.slow
 def test_no_module_outside_the_system_modules_names_a_system():
     """No string constant of the package (docstrings aside) is a system's name, outside the system modules: every
     branch asks the registry."""

@@ -394,6 +394,7 @@ RAY_CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("overrides", RAY_CASES.values(), ids=RAY_CASES.keys())
 def test_engines_agree_with_eigenrays(fmu_dir, overrides):
     """``ray`` through both engines: every time-series column (travel time, launch and arrival angles, the path)
@@ -471,6 +472,7 @@ SNR_TABLE = [*RAY, "acoustics.detection=snr", "acoustics.water_depth=20", "platf
              "acoustics.source_level=125", "acoustics.fluctuation=15"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("system", ["sbl", "lbl", "usbl"])
 def test_the_family_table_of_a_run(fmu_dir, monkeypatch, system):
     """An ``snr`` semicircle gets the family table, every cell answered (a box of seafloor transponders neither

@@ -69,6 +69,7 @@ def test_every_system_runs_on_the_same_diver_path():
     np.testing.assert_array_equal(paths[0], paths[2])
 
 
+@pytest.mark.slow
 def test_compare_systems_writes_one_row_per_system_and_the_lbl_row_is_a_plain_run(tmp_path, capsys):
     """The lbl row of ``compare --systems`` is the run a user gets with the LBL defaults set by hand (same seed,
     replicate 0); the sbl row the scenario's own run; the USBL row's PCRB is the USBL bound of its runs."""

@@ -239,6 +239,7 @@ def test_a_sync_folder_naming_paths_is_not_followed(tmp_path, array):
         sblsim.toa(detections, receivers=hydrophones, sync=sync / "offsets.csv", tag="T1")
 
 
+@pytest.mark.slow
 def test_replay_of_raw_detections_is_toa_then_the_tracker(tmp_path, capsys, array):
     """``sblsim replay DETECTIONS --format detections --sync DIR --tag ID``: the matrix ``sblsim toa`` writes,
     tracked as ``replay --format toa`` tracks that file."""

@@ -42,6 +42,7 @@ def synchronised(tmp_path_factory):
     return sim, files, result, folder, tag
 
 
+@pytest.mark.slow
 def test_the_sync_measures_each_receivers_noise(synchronised):
     """Each receiver's ``toa_sigma_s`` is its simulated noise within 20 % (its residuals' part alone too), the
     noisier receiver's ten times the others' as drawn, the same on every row of the receiver in ``offsets.csv``."""

@@ -249,6 +249,7 @@ def test_lake_hald_beats_umap(full):
     assert np.isclose(r.score["others"]["reference"]["rms_m"], rms_umap, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_written_files_keep_the_issue_names(full):
     import json
 
@@ -272,6 +273,7 @@ def test_written_files_keep_the_issue_names(full):
     assert not (full.out / "tracks.csv").exists()
 
 
+@pytest.mark.slow
 def test_a_fix_the_checks_do_not_trust_is_flagged(full):
     """The single-ping fixes' rows: one with no arrival to spare (three in 2-D) can fit a reflection exactly and is
     never trusted, so never ``ok``; among the rows left ``ok`` a share more than 10 m from the GPS well below the
@@ -609,6 +611,7 @@ def test_bound_predicts_the_observed_errors_on_lake_hald(full):
 THIN_P95_M, THIN_RMS_M = 40.0, 20.0
 
 
+@pytest.mark.slow
 def test_consistent_fixes_restart_holds_the_thinned_track(full):
     """The authors' 8 hydrophones: the smoother with the restart on agree_after consecutive consistent fixes of 4
     receivers keeps its 95 % and RMS errors against the GPS (scored here) below the thresholds above and below those
@@ -684,6 +687,7 @@ def test_the_robust_smoother_holds_the_thinned_track(full):
     assert np.sqrt(np.mean(e_plain**2)) > thin_rms and np.percentile(e_plain, 95) > 5.0
 
 
+@pytest.mark.slow
 def test_another_estimator_s_rows_off_the_robust_track_are_flagged(full):
     """A filter's, the RTS smoother's or a fix's row off the robust smoother's track where that row is ``ok``
     (models/tracking/quality.off_the_track) is flagged ``off_the_track``, never a row of the track itself; on the

@@ -137,6 +137,7 @@ def _shallow_array(tmp_path: Path) -> tuple[Path, Path, Path, np.ndarray]:
     return tmp_path / "toa.csv", tmp_path / "receivers.csv", tmp_path / "truth.csv", truth
 
 
+@pytest.mark.slow
 def test_a_depth_the_receivers_do_not_determine_is_taken_with_a_prior_and_said(tmp_path, capsys):
     """Receivers moored 1-5 m deep, a tag among their heights, no depth given: the summary and one console line say
     the depth was taken with a prior at the receivers' mean depth (read here with pandas), no row's depth σ is below
@@ -207,6 +208,7 @@ def test_a_record_whose_first_and_last_rows_nobody_heard_is_tracked(tmp_path, ki
     assert np.hypot(last.sigma_x, last.sigma_y) > np.hypot(before.sigma_x, before.sigma_y), (last, before)
 
 
+@pytest.mark.slow
 def test_a_sound_speed_given_that_the_pings_contradict_is_said_and_kept(tmp_path, capsys):
     """A tag simulated at 1,480 m/s among six receivers: given 1,480 m/s, the summary holds the pings' own
     calibration (within 3 of its σ of the truth) and no warning; given 1,495 m/s (1 % off), one console line says the

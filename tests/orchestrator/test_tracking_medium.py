@@ -83,6 +83,7 @@ def _warming(tmp_path: Path, low: float, high: float, seed: int = 5):
     return {"receivers": _receivers(tmp_path), "truth": _truth(tmp_path, emissions, truth)}, speed_file, speeds
 
 
+@pytest.mark.slow
 def test_a_measured_series_tracks_a_tag_in_water_that_warms(tmp_path):
     """The water warms from 1,440 to 1,470 m/s over the record: with the series the track is as good as the same
     tag's in water of one speed given exactly (RMS within 5 %); with one speed given (the series' median) it is
@@ -217,6 +218,7 @@ def test_bad_medium_options_are_refused_in_one_line(tmp_path, capsys, monkeypatc
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_a_series_off_the_records_time_base_is_refused_and_a_short_one_warned(tmp_path, capsys):
     """A series in seconds since 1970 (YAPS's and ``sblsim sync``'s ``epo, ss`` columns) against a record on its own
     time base: refused in one line without the record's stated origin (``--time-origin``), and with an origin a day

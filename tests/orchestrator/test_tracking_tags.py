@@ -33,6 +33,7 @@ def _array(tmp_path: Path, tags: int = 3) -> tuple[Path, Path]:
     return folder, receivers
 
 
+@pytest.mark.slow
 def test_each_tag_is_tracked_as_alone_and_a_refused_file_is_a_row(tmp_path):
     """In one process: every tag's track equal to replay_toa's of its file alone; the broken file a refused row with
     its one-line reason; tags.csv and one folder per tracked tag written."""
@@ -99,6 +100,7 @@ def test_worker_processes_and_a_dask_cluster_give_the_tracks_of_one_process(tmp_
         pd.testing.assert_frame_equal(one, many)
 
 
+@pytest.mark.slow
 def test_two_worker_processes_call_back_as_each_tag_ends(tmp_path):
     """run_tracks in two worker processes: each tag's callback called once with its outcome, the results those of
     one process (a local variable named as the callback had made every multi-worker study fail)."""

@@ -288,6 +288,7 @@ def simulated_track(kind: str, seed: int):
     return out, bound.smoothed
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["sbi", "rbi", "pbi"])
 def test_every_ping_type_is_consistent_and_near_its_bound_over_20_seeds(kind):
     """20 seeds of each ping type: the 2-D NEES of the robust smoother, the RTS smoother and every causal filter (the

@@ -92,6 +92,7 @@ def tracked(tmp_path_factory):
     return code, files, tag, truth, sim, out, said.getvalue()
 
 
+@pytest.mark.slow
 def test_the_study_says_the_two_places_in_one_line(tracked):
     code, files, tag, truth, sim, out, err = tracked
     assert code == 0
@@ -118,6 +119,7 @@ def test_the_study_says_the_two_places_in_one_line(tracked):
     assert int(s2) < 20 < int(s1) and int(s2) == round(100 * n2 / (n1 + n2)) and n2 >= 10, line
 
 
+@pytest.mark.slow
 def test_no_row_ok_but_the_first_emitter_s(tracked):
     code, files, tag, truth, sim, out, _ = tracked
     track = pd.read_csv(out / "tracks.csv", dtype={"tag": str})
@@ -134,6 +136,7 @@ def test_no_row_ok_but_the_first_emitter_s(tracked):
     assert summary["two_places"]["rows"] == int(second.sum())
 
 
+@pytest.mark.slow
 def test_a_stated_interval_still_refuses_them(tracked, capsys):
     """The tag's times of arrival as the study wrote them, replayed with its interval stated: refused in one line
     (the pings of the second place are closer than the interval to the first's), as before."""
