@@ -31,6 +31,8 @@ NOT_USED = ("serial_never_detected", "outside_detections_span", "no_detection_in
 SAID = {"serial_never_detected": "serial never detected",
         "outside_detections_span": "outside the detections' time span",
         "no_detection_in_window": "no detection in its window"}
+#: How many deployments not used the console's line names.
+NAMED = 10
 
 
 @dataclass
@@ -50,16 +52,21 @@ class InWater:
     deployments: Deployments
     assigned: Assigned
 
-    def line(self) -> str | None:
-        """The console's line on the deployments not used (None where every deployment is used)."""
+    def line(self, listed: str = "receivers.csv (used, not_used)") -> str | None:
+        """The console's line on the deployments not used (None where every deployment is used): their count per
+        cause, the first :data:`NAMED` of them by name, and ``listed``, the output that lists them all (``sblsim
+        sync`` writes no receivers.csv: its sync.json's ``receivers_file``)."""
         s = self.deployments.summary()
         gone = s["not_used"]
         if not gone["count"]:
             return None
+        sheet = self.deployments.sheet
+        names = sheet.loc[sheet["not_used"] != "", "receiver"].astype(str).tolist()
+        shown = ", ".join(names[:NAMED]) + (f" and {len(names) - NAMED:,} more" if len(names) > NAMED else "")
         causes = ", ".join(f"{gone[k]:,} {SAID[k]}" for k in NOT_USED if gone.get(k))
         return (f"receivers: {s['used']:,} of {s['in_sheet']:,} deployments of {self.deployments.source} used (those "
-                f"that logged a kept detection in their window); {gone['count']:,} not used ({causes}): left out of "
-                "the frame, the clocks, the tracks and the map, listed in receivers.csv (used, not_used)")
+                f"that logged a kept detection in their window); {gone['count']:,} not used ({causes}: {shown}): left "
+                f"out of the frame, the clocks, the tracks and the map, counted in {listed}")
 
 
 def in_water(detections: Detections, assigned: Assigned, deployments: Deployments) -> InWater:

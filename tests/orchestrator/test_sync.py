@@ -100,11 +100,13 @@ def test_simulated_echoes_flagged_and_outliers_rejected(simulated):
 def test_simulated_notes_the_receiver_never_heard_and_the_tag_without_a_row(simulated):
     _, result, _, folder = simulated
     s = result.summary
-    assert s["not_synchronised"] == ["Z"] and not s["receivers"]["Z"]["synchronised"]
-    assert any("left out: Z" in n for n in s["notes"])
+    # Z logged nothing: not a receiver of the array (readers/in_water), named in the one line that counts it
+    assert s["not_synchronised"] == [] and "Z" not in s["receivers"] and len(s["receivers"]) == 20
+    said = [n for n in s["notes"] if "not used" in n]
+    assert len(said) == 1 and "1 not used (1 serial never detected: Z)" in said[0] and "sync.json" in said[0]
     assert s["reference_receiver"] == "R0"
     written = json.loads((folder / "out" / "sync.json").read_text())
-    assert written["not_synchronised"] == ["Z"]
+    assert written["receivers_file"]["not_used"] == {"count": 1, "serial_never_detected": 1}
     for name in ("offsets.csv", "residuals.csv", "sync_tags.csv", "offsets.png", "residuals.png", "coverage.png"):
         assert (folder / "out" / name).stat().st_size > 0
     t = result.sync_tags
