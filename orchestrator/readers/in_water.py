@@ -52,10 +52,10 @@ class InWater:
     deployments: Deployments
     assigned: Assigned
 
-    def line(self, listed: str = "receivers.csv (used, not_used)") -> str | None:
+    def line(self, listed: str = "listed in receivers.csv (used, not_used)") -> str | None:
         """The console's line on the deployments not used (None where every deployment is used): their count per
-        cause, the first :data:`NAMED` of them by name, and ``listed``, the output that lists them all (``sblsim
-        sync`` writes no receivers.csv: its sync.json's ``receivers_file``)."""
+        cause, the first :data:`NAMED` of them by name, and ``listed``, where the output lists or counts them all
+        (``sblsim sync`` writes no receivers.csv: its sync.json's ``receivers_file`` counts them)."""
         s = self.deployments.summary()
         gone = s["not_used"]
         if not gone["count"]:
@@ -66,7 +66,7 @@ class InWater:
         causes = ", ".join(f"{gone[k]:,} {SAID[k]}" for k in NOT_USED if gone.get(k))
         return (f"receivers: {s['used']:,} of {s['in_sheet']:,} deployments of {self.deployments.source} used (those "
                 f"that logged a kept detection in their window); {gone['count']:,} not used ({causes}: {shown}): left "
-                f"out of the frame, the clocks, the tracks and the map, counted in {listed}")
+                f"out of the frame, the clocks, the tracks and the map, {listed}")
 
 
 def in_water(detections: Detections, assigned: Assigned, deployments: Deployments) -> InWater:

@@ -57,7 +57,7 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
     if array.line():
-        outcome.summary.setdefault("notes", []).append(array.line("sync.json's receivers_file"))
+        outcome.summary.setdefault("notes", []).append(array.line("counted in sync.json's receivers_file"))
     frame = deployments.frame
     if outcome.positions is not None and frame is not None:
         outcome.positions["lat"], outcome.positions["lon"] = frame.to_latlon(outcome.positions["x_m"].to_numpy(),
