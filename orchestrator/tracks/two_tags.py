@@ -61,12 +61,12 @@ class SecondPlace:
     summary: dict[str, Any]
 
 
-def _where(places: np.ndarray, frame: Frame | None) -> list[str]:
-    """Each place as the console says it: x, y in the frame [m], and latitude, longitude where the frame is known."""
+def _where(places: np.ndarray, lat_lon: np.ndarray | None) -> list[str]:
+    """Each place as the console says it: x, y in the frame [m], and latitude, longitude (``lat_lon`` (2, 2) [°])
+    where the frame is known."""
     out = [f"x {x:.0f}, y {y:.0f} m" for x, y in places]
-    if frame is not None:
-        lat, lon = frame.to_latlon(places[:, 0], places[:, 1])
-        out = [f"{o} (lat {a:.5f}°, lon {b:.5f}°)" for o, a, b in zip(out, lat, lon)]
+    if lat_lon is not None:
+        out = [f"{o} (lat {a:.5f}°, lon {b:.5f}°)" for o, (a, b) in zip(out, lat_lon)]
     return out
 
 
@@ -107,7 +107,8 @@ def second_place(toa: np.ndarray, fixes: tuple[np.ndarray, ...], trusted: np.nda
     if found is None:
         return toa, fixes, None
     rows = found.second
-    (one, other), (n1, n2) = _where(found.places, frame), found.fixes
+    lat_lon = None if frame is None else np.column_stack(frame.to_latlon(found.places[:, 0], found.places[:, 1]))
+    (one, other), (n1, n2) = _where(found.places, lat_lon), found.fixes
     said = (f"{n1:,} trusted fixes ({found.shares[0]:.0%}) around {one} and {n2:,} ({found.shares[1]:.0%}) around "
             f"{other}, {found.separation:.0f} m apart, {found.out_of_reach} of the second place's fixes out of reach "
             f"of the first's at {MAX_SPEED:g} m/s")
@@ -116,8 +117,8 @@ def second_place(toa: np.ndarray, fixes: tuple[np.ndarray, ...], trusted: np.nda
                          "pings (two tags sharing an id: split its detections by place or by receiver)")
     dim = fx.shape[1]
     second = SecondPlace(rows, fx[rows], fe[rows], fc[rows][:, :dim, :dim], used[rows].sum(axis=1), {
-        "places_m": found.places.tolist(), "places_lat_lon": None if frame is None else np.column_stack(
-            frame.to_latlon(found.places[:, 0], found.places[:, 1])).tolist(), "separation_m": found.separation,
+        "places_m": found.places.tolist(), "places_lat_lon": None if lat_lon is None else lat_lon.tolist(),
+        "separation_m": found.separation,
         "trusted_fixes": list(found.fixes), "shares": list(found.shares), "out_of_reach": found.out_of_reach,
         "second_span_s": list(found.span), "rows": int(rows.sum()), "reason": TWO_PLACES_REASON,
         "warning": f"one id heard from two places at once (two tags, or a code collision): {said}; the "
