@@ -89,9 +89,14 @@ def workers_ignore_ctrl_c() -> None:
     """In a worker process a command started (spawned: it imports the command line's module before its work),
     ignore SIGINT: Ctrl-C at a terminal reaches every process of the group, the command stops its workers (a pool
     terminated, a cluster closed) and a worker that took it itself would print its own traceback. Nothing in the
-    command's own process."""
-    spawned = "--multiprocessing-fork" in sys.argv  # its command line while it imports (before its parent is known)
-    worker = spawned or multiprocessing.parent_process() is not None
+    command's own process.
+
+    A spawned worker is known while it imports by its process's name, which the spawn's preparation sets first
+    (``SpawnProcess-1``; ``MainProcess`` in the command): the same preparation replaces ``sys.argv`` with the
+    command's before the import, and its parent process is only set after it."""
+    spawned = "--multiprocessing-fork" in sys.argv  # its command line before the preparation
+    worker = (spawned or multiprocessing.current_process().name != "MainProcess"
+              or multiprocessing.parent_process() is not None)
     if worker and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
