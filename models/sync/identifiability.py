@@ -46,6 +46,10 @@ from sblsim.models.declarations import ModelError
 #: On the boats array with its 11 sync tags heard the receivers pass at 0.05–0.4 (one hardly heard at 0.99); with 3
 #: of them (every other tag's receiver row cleared) none passes with a tag left out.
 MAX_SIGMA_RATIO = 0.5
+#: The survey's horizontal σ per axis [m] by default (a handheld GPS's at the surface above a moored receiver), and
+#: its allowed range: the prior of the receivers' positions refined (by the sync tags, or a moving tag's pings).
+SURVEY_SIGMA = 3.0
+SURVEY_SIGMA_RANGE = (0.01, 1000.0)
 
 
 @dataclass(frozen=True)
@@ -77,7 +81,7 @@ class Identifiability:
 
 
 def shape_sigma_ratio(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.ndarray,
-                      members: np.ndarray) -> np.ndarray:
+                      members: np.ndarray, scale: bool = False) -> np.ndarray:
     """Each receiver's posterior σ over its prior σ in the array's shape, worst direction (the module docstring).
 
     Parameters
@@ -90,6 +94,9 @@ def shape_sigma_ratio(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.
         [m] the prior's σ per axis, one or (R,).
     members : numpy.ndarray
         (R,) bool, the receivers in the fit (synchronised); the others' ratio is 1 (nothing added to the prior).
+    scale : bool
+        The array's scale in the gauge too (where the sound speed is fitted with the positions: no time of arrival
+        tells the two apart).
 
     Returns
     -------
@@ -116,9 +123,11 @@ def shape_sigma_ratio(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.
     P = covariance[np.ix_(index, index)]
     centred = xy[inside] - xy[inside].mean(axis=0)
     m = len(inside)
-    H = np.zeros((2 * m, 3))
+    H = np.zeros((2 * m, 4 if scale else 3))
     H[0::2, 0] = H[1::2, 1] = 1.0
     H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
+    if scale:
+        H[0::2, 3], H[1::2, 3] = centred[:, 0], centred[:, 1]
     H /= np.maximum(np.linalg.norm(H, axis=0), 1e-300)
     Q, _ = np.linalg.qr(H)
     G = np.eye(2 * m) - Q @ Q.T
@@ -173,4 +182,4 @@ def identify(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.ndarray, 
     return Identifiability(ratio, ratio_without, worst, determined, threshold)
 
 
-__all__ = ["Identifiability", "MAX_SIGMA_RATIO", "identify", "shape_sigma_ratio"]
+__all__ = ["Identifiability", "MAX_SIGMA_RATIO", "SURVEY_SIGMA", "SURVEY_SIGMA_RANGE", "identify", "shape_sigma_ratio"]

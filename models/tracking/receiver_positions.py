@@ -55,6 +55,10 @@ FOLDS = 4
 #: A ping whose fix at the surveyed positions fits this many times worse than the median ping's (χ² per degree of
 #: freedom) is left out of the refinement: a fix in a mirror place or of echoes, no start for Gauss-Newton.
 START_GATE = 25.0
+#: The least share by which the held-out pings' median χ² per degree of freedom must fall for a refinement to
+#: help: a right array's refinement moves it by its noise, and the pings it never saw fit it within a few per cent
+#: (the chance of that noise, or of the echoes' weights), never by a twentieth.
+HELD_OUT_GAIN = 0.05
 #: The σ [m] a place's depth is kept at in a 3-D fix (the depth is the tag's, not refitted).
 DEPTH_SIGMA = 0.01
 #: The most one Gauss-Newton step moves a receiver [survey σ]: a step the arrivals' weights are not yet right for
@@ -84,6 +88,12 @@ class Refinement:
         The pings fitted (at least :data:`MIN_ARRIVALS` arrivals).
     iterations : int
     converged : bool
+    bias, bias_sigma : numpy.ndarray
+        (R,) [m] each receiver's range bias and its σ (0 where not fitted).
+    anchored : int
+        The anchored pings fitted.
+    speed_scale, speed_scale_sigma : float
+        [1] the sound speed fitted over the one given, and its σ (1 and 0 where not fitted).
     """
 
     shift: np.ndarray
@@ -95,6 +105,11 @@ class Refinement:
     pings: int
     iterations: int
     converged: bool
+    bias: np.ndarray
+    bias_sigma: np.ndarray
+    anchored: int = 0
+    speed_scale: float = 1.0
+    speed_scale_sigma: float = 0.0
 
 
 def _checked(toa, receivers, places, c, sigma_toa, survey_sigma):
@@ -116,7 +131,9 @@ def _checked(toa, receivers, places, c, sigma_toa, survey_sigma):
 
 
 def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: float | np.ndarray,
-                     sigma_toa: float | np.ndarray, survey_sigma: float, dof: float = ROBUST_DOF) -> Refinement:
+                     sigma_toa: float | np.ndarray, survey_sigma: float, dof: float = ROBUST_DOF,
+                     biases: bool = False, anchored: tuple[np.ndarray, np.ndarray] | None = None,
+                     speed_sigma: float | None = None) -> Refinement:
     """The receivers' horizontal shifts and the tag's places fitted together (the module docstring).
 
     Each ping starts from its fix at the surveyed positions (:func:`~sblsim.models.tracking.fix.fix_pings`, from
@@ -141,6 +158,21 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         [m] the survey's σ per horizontal axis (the prior).
     dof : float
         ν of the arrivals' Student-t weights.
+    biases : bool
+        Fit each receiver's range bias [m] too (``toa_ij = t_j + (‖p_j − (r_i + d_i)‖ + β_i) / c_j``, its prior
+        ``N(0, survey_sigma²)``): a constant offset of its clock, as a synchronisation made on wrong positions
+        leaves it (the sync tags' ranges were as wrong).
+    anchored : (numpy.ndarray, numpy.ndarray), optional
+        Pings emitted at a receiver (sync tags at their receivers): their times of arrival (Q, R) [s] on the same
+        clock and each one's receiver (Q,) (its row of ``receivers``); their places move with that receiver (each
+        emission time an unknown of its own; an arrival at its own receiver left out), at the median sound speed.
+        With ``biases`` they tell a receiver's clock from its place: both directions of a pair of receivers are
+        heard.
+    speed_sigma : float, optional
+        [1] fit the sound speed too, as a scale of the one given (``c / m``, a prior σ of ``speed_sigma`` on
+        ``m``): a sound speed calibrated from the pings on the surveyed positions took up their error in part. The
+        array's scale then trades with it (no time of arrival tells them apart): it is a gauge like the array's
+        translation and rotation, the survey's. None: as given.
 
     Returns
     -------
@@ -168,60 +200,156 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     xy, t = fixed[:, :2].copy(), emitted.copy()
     z = places[rows, 2] if dim == 3 else None
     n = len(receivers)
-    prior = 1.0 / survey_sigma**2
-    d = np.zeros((n, 2))
-    converged, iteration = False, 0
-    for iteration in range(1, ITERATIONS + 1):
-        normal, rhs, ping_steps = _step(toa, heard, receivers, d, xy, t, z, c, sigma, dof)
+    anchor = None if anchored is None else _Anchored.of(anchored, receivers, float(np.median(c)))
+    d = np.zeros((n, 3 if biases else 2))  # each receiver's shift [m] (and range bias [m])
+    free = speed_sigma is not None
+    m = 1.0  # the slowness's scale: the sound speed c / m
+    prior = np.r_[np.full(d.size, survey_sigma**-2.0), [speed_sigma**-2.0] if free else []]
+    converged, iterations = False, 0
+    while iterations < ITERATIONS:
+        iterations += 1
+        normal, rhs, ping_steps = _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof)
+        if anchor is not None:
+            more, extra = anchor.terms(receivers, d, m, free, sigma, dof)
+            normal, rhs = normal + more, rhs + extra
         normal[np.diag_indices_from(normal)] += prior
-        rhs -= prior * d.ravel()
-        step = np.linalg.solve(normal, rhs).reshape(n, 2)
-        step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step).max()), 1e-300))
-        d += step
-        # the pings' steps given the shifts' (back-substitution: Δp_j = A_j⁻¹ (b_j − B_j Δd))
+        rhs -= prior * np.r_[d.ravel(), [m - 1.0] if free else []]
+        step = np.linalg.solve(normal, rhs)
+        step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[:d.size]).max()), 1e-300))
+        # the pings' steps given the receivers' (back-substitution: Δθ_j = A_j⁻¹ (b_j − B_j Δφ))
         px, pt = ping_steps(step)
         xy += px
         t += pt
-        if np.abs(step).max() < STEP_TOLERANCE:
+        if anchor is not None:
+            anchor.advance(step)
+        d += step[:d.size].reshape(d.shape)
+        m += float(step[-1]) if free else 0.0
+        if np.abs(step[:d.size]).max() < STEP_TOLERANCE:
             converged = True
             break
-    normal, _, _ = _step(toa, heard, receivers, d, xy, t, z, c, sigma, dof, covariance=True)
+    normal, _, _ = _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof, covariance=True)
+    if anchor is not None:
+        normal = normal + anchor.terms(receivers, d, m, free, sigma, dof, covariance=True)[0]
     normal[np.diag_indices_from(normal)] += prior
-    covariance = np.linalg.inv(normal)
+    whole = np.linalg.inv(normal)
+    k = d.shape[1]
+    shifts = np.ravel(np.c_[k * np.arange(n), k * np.arange(n) + 1])  # the shifts' rows, x then y per receiver
+    covariance = whole[np.ix_(shifts, shifts)]
     arrivals = heard.sum(axis=0)
-    ratio = shape_sigma_ratio(receivers[:, :2], covariance, survey_sigma, arrivals > 0)
+    ratio = shape_sigma_ratio(receivers[:, :2], covariance, survey_sigma, arrivals > 0, scale=free)
     determined = ratio < MAX_SIGMA_RATIO
-    return Refinement(np.where(determined[:, None], d, 0.0), d, covariance, ratio, determined, arrivals,
-                      len(rows), iteration, converged)
+    bias = d[:, 2].copy() if biases else np.zeros(n)
+    bias_sigma = np.sqrt(np.diag(whole)[2:k * n:3]) if biases else np.zeros(n)
+    return Refinement(np.where(determined[:, None], d[:, :2], 0.0), d[:, :2].copy(), covariance, ratio, determined,
+                      arrivals, len(rows), iterations, converged, bias, bias_sigma,
+                      0 if anchor is None else int(len(anchor.t)), 1.0 / m,
+                      float(np.sqrt(whole[-1, -1])) / m**2 if free else 0.0)
 
 
-def _step(toa, heard, receivers, d, xy, t, z, c, sigma, dof, covariance: bool = False):
-    """One Gauss-Newton step's reduced system in the shifts, ``(2R, 2R)`` and ``(2R,)``, and the pings' steps as a
-    function of the shifts' step (the unknowns of the ping eliminated chunk by chunk). ``covariance``: the weights
-    of the observed information (0 past √ν σ) for the posterior, as the robust smoother's covariance."""
-    n = len(receivers)
-    normal = np.zeros((n, 2, n, 2))
-    rhs = np.zeros((n, 2))
+def _weights(e: np.ndarray, sigma: np.ndarray, dof: float, covariance: bool) -> np.ndarray:
+    """Each arrival's Student-t weight over σ² [1/s²] (``(ν + 1) / (ν + z²)``), or its observed information's with
+    ``covariance`` (0 past √ν σ: the robust smoother's covariance)."""
+    zed = e / sigma
+    if covariance:
+        return np.maximum((dof + 1.0) * (dof - zed**2) / (dof + zed**2) ** 2, 0.0) / sigma**2
+    return (dof + 1.0) / (dof + zed**2) / sigma**2
+
+
+class _Anchored:
+    """Pings emitted where a receiver is (a sync tag at its receiver): each one's place is that receiver's, shifted
+    with it; its emission time its only unknown of its own. Each arrival at another receiver i of ping j from the
+    receiver k: ``toa = t_j + (‖(r_k + d_k) − (r_i + d_i)‖ + β_i) / c``."""
+
+    def __init__(self, toa: np.ndarray, source: np.ndarray, c: float, t: np.ndarray):
+        self.toa, self.source, self.c, self.t = toa, source, c, t
+        self._steps = None
+
+    @classmethod
+    def of(cls, anchored, receivers: np.ndarray, c: float) -> "_Anchored":
+        toa, source = np.asarray(anchored[0], float), np.asarray(anchored[1], int)
+        if toa.ndim != 2 or toa.shape[1] != len(receivers) or source.shape != (len(toa),) \
+                or not ((source >= 0) & (source < len(receivers))).all():
+            raise ModelError(f"receiver positions: anchored pings {toa.shape} from {source.shape} receivers; allowed: "
+                             f"(Q, {len(receivers)}) and (Q,) receiver indices")
+        toa = toa.copy()
+        toa[np.arange(len(toa)), source] = np.nan  # a receiver's own tag: no distance to learn from
+        keep = np.isfinite(toa).sum(axis=1) >= 2
+        toa, source = toa[keep], source[keep]
+        rho = np.linalg.norm(receivers[source][:, None, :] - receivers[None], axis=2)
+        t = np.nanmedian(toa - rho / c, axis=1)
+        return cls(toa, source, c, t)
+
+    def terms(self, receivers: np.ndarray, d: np.ndarray, m: float, free: bool, sigma: np.ndarray, dof: float,
+              covariance: bool = False):
+        """Their reduced normal matrix and right-hand side in the receivers' unknowns (and the slowness's scale,
+        last, where ``free``), each emission time eliminated; the emission times' steps kept for :meth:`advance`."""
+        n, k = d.shape
+        heard = np.isfinite(self.toa)
+        q, i = np.nonzero(heard)
+        src = self.source[q]
+        where = np.array(receivers, float)
+        where[:, :2] += d[:, :2]
+        diff = where[src] - where[i]
+        rho = np.linalg.norm(diff, axis=1)
+        u = m * diff[:, :2] / np.maximum(rho, 1e-9)[:, None] / self.c  # ∂τ/∂(place), (a, 2)
+        if k == 3:
+            rho = rho + d[i, 2]
+        travel = rho / self.c
+        e = self.toa[q, i] - self.t[q] - m * travel
+        w = _weights(e, sigma[i], dof, covariance)
+        J = np.zeros((len(q), n * k + int(free)))  # ∂τ/∂(receivers' unknowns[, m])
+        rows = np.arange(len(q))
+        J[rows, k * i], J[rows, k * i + 1] = -u[:, 0], -u[:, 1]
+        J[rows, k * src] += u[:, 0]
+        J[rows, k * src + 1] += u[:, 1]
+        if k == 3:
+            J[rows, k * i + 2] = m / self.c
+        if free:
+            J[:, -1] = travel
+        a = np.bincount(q, w, minlength=len(self.toa))  # each emission time's information
+        b = np.bincount(q, w * e, minlength=len(self.toa))
+        Bt = np.zeros((len(self.toa), J.shape[1]))
+        np.add.at(Bt, q, w[:, None] * J)
+        inv = np.where(a > 0, 1.0 / np.maximum(a, 1e-300), 0.0)
+        normal = (J * w[:, None]).T @ J - (Bt * inv[:, None]).T @ Bt
+        rhs = J.T @ (w * e) - Bt.T @ (inv * b)
+        self._steps = (inv, b, Bt)
+        return normal, rhs
+
+    def advance(self, step: np.ndarray) -> None:
+        """The emission times moved with the receivers' step: ``Δt_j = (b_j − B_j Δφ) / a_j``."""
+        inv, b, Bt = self._steps
+        self.t = self.t + inv * (b - Bt @ step)
+
+
+def _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof, covariance: bool = False):
+    """One Gauss-Newton step's reduced system in the receivers' unknowns ``d`` (R, k: the shift, and the range bias
+    where k is 3) and, where ``free``, the slowness's scale ``m`` last: ``(kR [+ 1], kR [+ 1])`` and its right-hand
+    side, and the pings' steps as a function of that step (each ping's unknowns eliminated, chunk by chunk).
+    ``covariance``: the weights of the observed information."""
+    n, k = d.shape
+    normal = np.zeros((n, k, n, k))
+    rhs = np.zeros((n, k))
+    cross = np.zeros((n, k))  # the receivers' unknowns against the slowness's scale
+    scale_normal = scale_rhs = 0.0
     pieces = []
     for lo in range(0, len(toa), CHUNK):
         rows = slice(lo, lo + CHUNK)
         here = heard[rows]
-        at = receivers[None, :, :2] + d[None]  # (1, R, 2)
+        at = receivers[None, :, :2] + d[None, :, :2]  # (1, R, 2)
         delta = xy[rows, None, :] - at  # (p, R, 2)
         vertical = 0.0 if z is None else (z[rows, None] - receivers[None, :, 2]) ** 2
         rho = np.sqrt((delta**2).sum(axis=2) + vertical)
         cc = c[rows, None]
-        e = np.where(here, toa[rows] - t[rows, None] - rho / cc, 0.0)
-        u = delta / np.maximum(rho, 1e-9)[..., None] / cc[..., None]  # ∂ρ/c ∂p, (p, R, 2) [s/m]
-        zed = e / sigma[None]
-        if covariance:
-            weight = np.maximum((dof + 1.0) * (dof - zed**2) / (dof + zed**2) ** 2, 0.0)
-        else:
-            weight = (dof + 1.0) / (dof + zed**2)
-        w = np.where(here, weight / sigma[None] ** 2, 0.0)  # (p, R) [1/s²]
+        u = m * delta / np.maximum(rho, 1e-9)[..., None] / cc[..., None]  # ∂τ/∂p, (p, R, 2) [s/m]
+        if k == 3:  # the receiver's range bias: a constant offset of its clock, in metres
+            rho = rho + d[None, :, 2]
+        travel = rho / cc  # ∂τ/∂m, (p, R) [s]
+        e = np.where(here, toa[rows] - t[rows, None] - m * travel, 0.0)
+        w = np.where(here, _weights(e, sigma[None], dof, covariance), 0.0)  # (p, R) [1/s²]
         w[(w > 0).sum(axis=1) < MIN_ARRIVALS] = 0.0  # a ping the observed information leaves too few: nothing
         g = np.concatenate([u, np.ones(u.shape[:2] + (1,))], axis=2)  # ∂τ/∂(x, y, t), (p, R, 3)
-        h = -u  # ∂τ/∂d, (p, R, 2)
+        h = -u if k == 2 else np.concatenate([-u, np.broadcast_to(m / cc, u.shape[:2])[..., None]], axis=2)
         A = np.einsum("pr,pra,prb->pab", w, g, g)
         diagonal_a = A[:, np.arange(3), np.arange(3)]
         # a relative ridge (Levenberg's) keeps a ping of bad geometry invertible; an empty ping's block the identity
@@ -232,22 +360,38 @@ def _step(toa, heard, receivers, d, xy, t, z, c, sigma, dof, covariance: bool = 
         # C: Σ_j w h hᵀ on the diagonal blocks; minus Σ_j B_jᵀ A_j⁻¹ B_j over every pair of receivers
         diagonal = np.einsum("pr,pra,prb->rab", w, h, h)
         q = np.einsum("pia,pab,pkb->pik", wg, Ainv, wg)
-        coupled = np.einsum("pik,pia,pkb->iakb", q, h, h)
-        normal -= coupled
+        normal -= np.einsum("pik,pia,pkb->iakb", q, h, h)
         normal[np.arange(n), :, np.arange(n), :] += diagonal
         Ab = np.einsum("pab,pb->pa", Ainv, b)
         rhs += np.einsum("pr,pra,pr->ra", w, h, e) - np.einsum("pra,pa,prb->rb", wg, Ab, h)
-        pieces.append((Ainv, Ab, wg, h))
+        Bm = None
+        if free:  # the slowness's scale: one more unknown, every arrival's
+            Bm = np.einsum("pra,pr->pa", wg, travel)  # B_j's column of m, (p, 3)
+            AB = np.einsum("pab,pb->pa", Ainv, Bm)
+            cross += np.einsum("pr,pra,pr->ra", w, h, travel) - np.einsum("pra,pa,prb->rb", wg, AB, h)
+            scale_normal += float(np.sum(w * travel**2) - np.einsum("pa,pa->", Bm, AB))
+            scale_rhs += float(np.sum(w * travel * e) - np.einsum("pa,pa->", AB, b))
+        pieces.append((Ainv, Ab, wg, h, Bm))
 
     def ping_steps(step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         out = []
-        for Ainv, Ab, wg, h in pieces:
-            Bd = np.einsum("pra,prb,rb->pa", wg, h, step)
+        for Ainv, Ab, wg, h, Bm in pieces:
+            Bd = np.einsum("pra,prb,rb->pa", wg, h, step[:n * k].reshape(n, k))
+            if Bm is not None:
+                Bd = Bd + Bm * step[-1]
             out.append(Ab - np.einsum("pab,pb->pa", Ainv, Bd))
         whole = np.concatenate(out) if out else np.zeros((0, 3))
         return whole[:, :2], whole[:, 2]
 
-    return normal.reshape(2 * n, 2 * n), rhs.ravel(), ping_steps
+    size = k * n + int(free)
+    full = np.zeros((size, size))
+    full[:k * n, :k * n] = normal.reshape(k * n, k * n)
+    vector = np.zeros(size)
+    vector[:k * n] = rhs.ravel()
+    if free:
+        full[:k * n, -1] = full[-1, :k * n] = cross.ravel()
+        full[-1, -1], vector[-1] = scale_normal, scale_rhs
+    return full, vector, ping_steps
 
 
 @dataclass(frozen=True)
@@ -273,16 +417,19 @@ class HeldOut:
 
     @property
     def helps(self) -> bool:
-        """The refined array fits the pings it never saw better, in the whole record and in most of its blocks."""
+        """The refined array fits the pings it never saw better, by :data:`HELD_OUT_GAIN` in the whole record and
+        in most of its blocks."""
         better = self.folds[:, 1] < self.folds[:, 0]
-        return bool(self.refined < self.surveyed and better.sum() * 2 > len(better))
+        return bool(self.refined <= (1.0 - HELD_OUT_GAIN) * self.surveyed and better.sum() * 2 > len(better))
 
 
 def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: float | np.ndarray,
-             sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS,
-             dof: float = ROBUST_DOF) -> HeldOut:
+             sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS, dof: float = ROBUST_DOF,
+             biases: bool = False, anchored: tuple[np.ndarray, np.ndarray] | None = None,
+             speed_sigma: float | None = None) -> HeldOut:
     """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
-    the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers`; the
+    the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
+    anchored pings in every refinement, the refined array's times less its biases); the
     blocks' pings fixed with every arrival (no gate: a receiver's error is what is measured), each from its place or
     the fix's own start (the better), their depth kept at the places' in 3-D.
 
@@ -301,12 +448,16 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
     for block in np.array_split(usable, folds):
         keep = np.ones(len(toa), bool)
         keep[block] = False
-        refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof)
+        refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
+                                   anchored, speed_sigma)
         moved = receivers.copy()
         moved[:, :2] += refined.shift
+        # the refined array's times less its receivers' range biases (where determined, as its shifts), at its speed
+        speed = c[block] * refined.speed_scale
+        corrected = toa[block] - np.where(refined.determined, refined.bias, 0.0)[None] / speed[:, None]
         medians = []
-        for k, array in enumerate((receivers, moved)):
-            ratio = _best_fixes(toa[block], array, places[block], c[block], sigma)[2]
+        for k, (array, times, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
+            ratio = _best_fixes(times, array, places[block], at, sigma)[2]
             pooled[k].append(ratio)
             medians.append(np.nanmedian(ratio) if np.isfinite(ratio).any() else np.nan)
         per_fold.append(medians)
@@ -338,5 +489,5 @@ def _best_fixes(toa, receivers, places, c, sigma):
     return out
 
 
-__all__ = ["CHUNK", "DEPTH_SIGMA", "FOLDS", "HeldOut", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS", "Refinement",
-           "START_GATE", "STEP_TOLERANCE", "held_out", "refine_receivers"]
+__all__ = ["CHUNK", "DEPTH_SIGMA", "FOLDS", "HELD_OUT_GAIN", "HeldOut", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS",
+           "Refinement", "START_GATE", "STEP_TOLERANCE", "held_out", "refine_receivers"]

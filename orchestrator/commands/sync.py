@@ -13,12 +13,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.sync.toa_console import say_warnings
+from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
     import pandas as pd
@@ -28,9 +30,6 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
 #: speed's range [m/s].
 BIN_HOURS = (0.05, 168.0)
 SOUND_SPEED = (1300.0, 1700.0)
-#: The survey's horizontal sigma per axis [m] by default and its allowed range (the refinement's prior).
-SURVEY_SIGMA = 3.0
-SURVEY_SIGMA_RANGE = (0.01, 1000.0)
 
 
 @dataclass
@@ -163,7 +162,7 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
     reference = text_argument(reference, "reference")
     flag_argument(force, "force")
     flag_argument(refine_positions, "refine_positions")
-    survey_sigma = _survey_sigma(survey_sigma, refine_positions, "survey_sigma")
+    survey_sigma = survey_sigma_argument(survey_sigma, refine_positions, "survey_sigma")
     target = prepare_out(out, force, "sync.json", "synchronisation")
     from sblsim.orchestrator.sync.study_sync import synchronise_files
 
@@ -175,16 +174,6 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         write(outcome, target)
     return SyncResult(outcome.summary, outcome.offsets, outcome.residuals, outcome.sync_tags, target, outcome,
                       outcome.positions)
-
-
-def _survey_sigma(value: Any, refine: bool, where: str) -> float:
-    """The survey sigma [m] checked: in its range, given only with the refinement."""
-    if value is None:
-        return SURVEY_SIGMA
-    if not refine:
-        raise ConfigError(f"{where}: given without refining the positions; allowed: with "
-                          f"{'--refine-positions' if where.startswith('--') else 'refine_positions=True'}")
-    return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
 
 
 NAME = "sync"
@@ -222,7 +211,7 @@ def main(args: argparse.Namespace) -> int:
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", *SOUND_SPEED,
                                                                 "m/s")
     hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
-    survey = _survey_sigma(args.survey_sigma, args.refine_positions, "--survey-sigma")
+    survey = survey_sigma_argument(args.survey_sigma, args.refine_positions, "--survey-sigma")
     from sblsim.orchestrator.sync.outputs import write
     from sblsim.orchestrator.sync.study_sync import synchronise_files
 

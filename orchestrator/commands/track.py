@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.commands.common import add_water_arguments
 from sblsim.orchestrator.commands.console import add_receivers, output_folder
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out
@@ -86,8 +87,8 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
           salinity: float | None = None, bin_hours: float = 1.0, workers: int | None = None,
           scheduler: str | None = None, toa_sigma: float | None = None,
           temperature_file: str | Path | None = None, water_depth: float | None = None,
-          force_interval: bool = False, out: str | Path | None = None, force: bool = False,
-          progress: ProgressSpec = False) -> StudyResult:
+          force_interval: bool = False, refine_positions: bool = False, survey_sigma: float | None = None,
+          out: str | Path | None = None, force: bool = False, progress: ProgressSpec = False) -> StudyResult:
     """Track every tag of a telemetry study: ``sblsim track`` (docs/telemetry.md).
 
     Parameters
@@ -156,6 +157,14 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         Take a tag's stated interval (the sheet's) where its detections contradict it as a whole: a note says how
         many detections it drops; without it such a tag is a refused row of ``tags.csv`` naming the interval its
         detections show.
+    refine_positions : bool
+        Refine the receivers' horizontal positions from the moving tags' own pings (the tracks and the positions
+        solved together, the surveyed positions as priors) and make the study again on them, kept only where the
+        pings left out fit them better and the reference and left-out sync tags are not worse (both said;
+        ``positions.csv``, ``summary["positions"]``: :mod:`sblsim.orchestrator.telemetry.study_positions`).
+    survey_sigma : float, optional
+        The surveyed positions' σ per horizontal axis [m] in [0.01, 1000] (default 3: a handheld GPS's); only with
+        ``refine_positions``.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
@@ -186,9 +195,9 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
                                    ("sound_speed", "sound_speed_file", "temperature", "salinity"), temperature_file)
     options = _options(format, crs, frame, tag, bin_hours, workers, scheduler, medium,
                        {k: k for k in ("format", "crs", "frame", "tag", "bin_hours", "workers", "toa_sigma",
-                                       "force_interval", "tz")},
-                       toa_sigma, force_interval, tz) | water_arguments(temperature_file, water_depth,
-                                                                        ("temperature_file", "water_depth"))
+                                       "force_interval", "tz", "refine_positions", "survey_sigma")},
+                       toa_sigma, force_interval, tz, refine_positions, survey_sigma) \
+        | water_arguments(temperature_file, water_depth, ("temperature_file", "water_depth"))
     options["spatial"] = spatial
     target = prepare_out(out, force, "study.json", "study")
     outcome = _run(detections[0] if len(detections) == 1 else detections, receivers, tags, sync, options, target,
@@ -258,6 +267,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force-interval", action="store_true",
                    help="take a tag's stated interval (the sheet's) where its detections contradict it as a whole "
                         "(that tag refused otherwise); a note says how many detections it drops")
+    p.add_argument("--refine-positions", action="store_true",
+                   help="refine the receivers' horizontal positions from the moving tags' own pings (the surveyed "
+                        "positions as priors) and track again on them where the pings left out and the reference "
+                        "tags say it helps; writes positions.csv")
+    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
+                   help=f"the receivers' surveyed positions' sigma per horizontal axis [m] in [0.01, 1000] (default "
+                        f"{SURVEY_SIGMA:g}: a handheld GPS's); only with --refine-positions")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/study_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
 
@@ -270,8 +286,8 @@ def main(args: argparse.Namespace) -> int:
     options = _options(args.format, args.crs, args.frame, args.tag, args.bin_hours, args.workers, args.scheduler,
                        medium, {k: "--" + k.replace("_", "-") for k in ("format", "crs", "frame", "tag", "bin_hours",
                                                                        "workers", "toa_sigma", "force_interval",
-                                                                       "tz")},
-                       args.toa_sigma, args.force_interval, args.tz) \
+                                                                       "tz", "refine_positions", "survey_sigma")},
+                       args.toa_sigma, args.force_interval, args.tz, args.refine_positions, args.survey_sigma) \
         | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
     options["spatial"] = args.spatial
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections[0].stem)}", args.force,
@@ -280,13 +296,16 @@ def main(args: argparse.Namespace) -> int:
 
     detections = args.detections[0] if len(args.detections) == 1 else DetectionFiles(args.detections)
     outcome = _run(detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
-    for line, warning in tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags")):
+    from sblsim.orchestrator.telemetry.study_positions import lines as position_lines
+    for line, warning in (tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
+                          + position_lines(outcome.summary.get("positions"))):
         print(line, file=sys.stderr if warning else sys.stdout)
     for note in outcome.summary["notes"]:
         print(f"note: {note}", file=sys.stderr)
     print(closing_line(outcome.tags, outcome.summary["wall_time_s"], out,
                        f"tracks.csv, tags.csv, receivers.csv, reference_tags.csv, study.json, "
-                       f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}map.png, report.html, "
+                       f"{'tracks.geojson, ' if (out / 'tracks.geojson').exists() else ''}"
+                       f"{'positions.csv, ' if outcome.positions is not None else ''}map.png, report.html, "
                        f"{'sync/, ' if outcome.sync is not None else ''}tags/: a folder per tag"))
     return 0
 

@@ -34,6 +34,7 @@ from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
 from sblsim.models.sync.emissions import connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import check_resolution, residual_warning, time_quantum
@@ -54,10 +55,6 @@ BIN_HOURS_RANGE = (0.05, 168.0)
 #: [s] the longest a receiver is taken to have been off between the last detection before its time went back in
 #: the file's order and the first after (a download's), for the search of its new part's shift (breaks.part_shifts).
 RESET_GAP = 86400.0
-#: The survey's horizontal sigma per axis [m] by default (a handheld GPS's at the surface above a moored receiver),
-#: and its allowed range.
-SURVEY_SIGMA = 3.0
-SURVEY_SIGMA_RANGE = (0.01, 1000.0)
 
 
 @dataclass

@@ -5,7 +5,8 @@
 summary: the files, the frame and its CRS, the detections set aside, the deployments used and not, the clocks, the
 tags), ``tracks.geojson`` (RFC 7946: the receivers used as points, each tag's rows not flagged as a line, WGS 84
 longitude and latitude; where the frame is known), ``reference_tags.csv`` (the reference tags and the sync tags
-left out in turn, scored against their known positions: :mod:`.reference_tags`), ``map.png``
+left out in turn, scored against their known positions: :mod:`.reference_tags`), ``positions.csv`` (with
+``--refine-positions``: the receivers' positions refined from the moving tags, :mod:`.study_positions`), ``map.png``
 (:func:`study_map`), the synchronisation made (``sync/``, as ``sblsim sync`` writes it) and one folder per tag
 (its ``toa.txt``, ``receivers.csv``, ``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes
 them).
@@ -275,6 +276,8 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     outcome.tags.to_csv(folder / "tags.csv", index=False)
     outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
     references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
+    if outcome.positions is not None:
+        outcome.positions.to_csv(folder / "positions.csv", index=False)
     (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
     shapes = geojson(outcome)
     if shapes is not None:

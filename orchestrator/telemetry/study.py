@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import time as clock
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -43,6 +44,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
@@ -63,6 +65,8 @@ from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.report.daily import daily_counts
+from sblsim.orchestrator.telemetry.study_positions import ROUND_TOLERANCE, ROUNDS, refine_study, sync_pings
+from sblsim.orchestrator.telemetry.study_positions import verdict as refined_verdict
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
@@ -107,6 +111,9 @@ class StudyOutcome:
         The synchronisation made here (None where given or taken as logged).
     daily : pandas.DataFrame or None
         The kept detections per deployment and UTC day (``detections_daily.csv``: :mod:`.report.daily`).
+    positions : pandas.DataFrame or None
+        ``positions.csv``: the receivers' positions refined from the moving tags (with ``refine_positions``;
+        :class:`~.study_positions.StudyRefinement`).
     """
 
     tracks: pd.DataFrame
@@ -117,6 +124,7 @@ class StudyOutcome:
     matrices: dict[str, Any] = field(default_factory=dict)
     sync: Any = None
     daily: Any = None
+    positions: Any = None
 
 
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
@@ -127,9 +135,12 @@ TOO_COARSE = "as logged (times too coarse to synchronise)"
 
 
 def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
-            series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
+            series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str], refine: bool = False,
+            survey_sigma: float = SURVEY_SIGMA):
     """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
-    synchronisation made here (or None)."""
+    synchronisation made here (or None). With ``refine`` the synchronisation refines the receivers' positions with
+    the clocks where its sync tags determine them (:func:`~sblsim.orchestrator.sync.run.synchronise`; said in a note
+    where they determine none), and the table is theirs."""
     table = assigned.hydrophones
     if sync_dir is not None:
         clocks = read_clocks(sync_dir)
@@ -142,14 +153,30 @@ def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_spe
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
     rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
+        def synchronised(refine: bool):
+            return synchronise(assigned.detections, table, sound_speed, series, bin_hours,
+                               receivers_file=deployments.source, alternatives=deployments.alternatives(),
+                               refine_positions=refine, survey_sigma=survey_sigma)
+
         try:
-            outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours,
-                                  receivers_file=deployments.source, alternatives=deployments.alternatives())
+            try:
+                outcome = synchronised(refine)
+            except RoundingError:
+                raise
+            except ModelError as exc:  # the sync tags determine no position: the clocks on the table's
+                if not refine:
+                    raise
+                notes.append(f"the sync tags refine no receiver's position: {exc}")
+                outcome = synchronised(False)
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
+            if outcome.positions is not None:  # the clocks fitted with the positions the sync tags refined
+                moved = outcome.positions[outcome.positions["refined"].astype(bool)]
+                table, _ = with_positions(table, {str(r.serial): (float(r.x_m), float(r.y_m))
+                                                  for r in moved.itertuples()})
             return offsets_clocks(outcome.offsets), table, {
                 "source": "synchronised here", "reference_receiver": s["reference_receiver"],
                 "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
@@ -207,7 +234,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
               toa_sigma: float | None = None, started: Callable[[list[str], dict[str, Any]], None] | None = None,
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
               water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
-              tz: str | None = None) -> StudyOutcome:
+              tz: str | None = None, refine_positions: bool = False,
+              survey_sigma: float = SURVEY_SIGMA) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -258,6 +286,11 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     tz : str, optional
         The study's IANA time zone (``Europe/Copenhagen``) of actel's local times (deployments, release dates);
         without it such times are refused unless they carry their offset.
+    refine_positions : bool
+        Refine the receivers' horizontal positions from the moving tags' own pings and make the study again on them
+        where that helps (:mod:`.study_positions`: ``summary["positions"]``, the outcome's ``positions``).
+    survey_sigma : float
+        [m] the receivers' surveyed positions' σ per horizontal axis (the refinement's prior).
 
     Returns
     -------
@@ -297,95 +330,178 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     rounded = rounding_warning(assigned.detections, assigned.hydrophones, sound_speed)
     if rounded:
         notes.append(rounded)
-    clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours, notes)
-    _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
-    frame_crs = None if deployments.frame is None else deployments.frame.crs
-    groups = assigned.detections.frame.groupby("tag", sort=False).groups
-    rows: dict[str, dict[str, Any]] = {}
-    jobs, matrices, folders = [], {}, {}
-    logged = clocks_info["source"].startswith("as logged")
-    for name, spec in asked:
-        row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
-               "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
-               **unpositioned(0)}
+
+    def attempt(deployments, assigned, notes: list[str], workdir: Path, refine: bool = False) -> StudyOutcome:
+        """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``;
+        ``refine``: the synchronisation refines the positions with its sync tags."""
+        clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours,
+                                                     notes, refine, survey_sigma)
+        _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
+        frame_crs = None if deployments.frame is None else deployments.frame.crs
+        groups = assigned.detections.frame.groupby("tag", sort=False).groups
+        rows: dict[str, dict[str, Any]] = {}
+        jobs, matrices, folders = [], {}, {}
+        logged = clocks_info["source"].startswith("as logged")
+        for name, spec in asked:
+            row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
+                   "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
+                   **unpositioned(0)}
+            try:
+                key = match(name, detected)
+                if key is None:
+                    raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
+                folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"  # never one of the study's own names
+                if folder in folders.values():
+                    raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
+                mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
+                counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
+                row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
+                        "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
+                found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary",
+                                clocks_info["source"] == TOO_COARSE)
+                if found is not None:
+                    rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
+                        counted.pings, counted.at_once, found[0])
+                    continue
+                kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
+                        list(spec.burst_interval), "interval_s": spec.interval,
+                        "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
+                matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
+                                                  spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
+                if matrix.summary.get("interval_warning"):
+                    notes.append(f"tag {key}: {matrix.summary['interval_warning']}")
+                heard = np.isfinite(matrix.toa).sum(axis=1)
+                row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
+                _write_matrix(matrix, workdir / folder, notes)
+                matrices[folder] = matrix
+                folders[name] = folder
+                options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
+                           "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
+                           "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
+                           "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
+                           "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
+                           "force_interval": force_interval, "temperature_path": water_path}
+                if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
+                    options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
+                                                                np.isfinite(matrix.toa).any(axis=0))
+                    water_info["per_tag_m"][key] = options["water_depth"]
+                jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
+                row["folder"] = folder
+            except ModelError as exc:
+                code = code_of(str(exc))
+                row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
+                                                                                 code)
+            rows[name] = row
+        summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
+        summary["toa_noise"] = noise_info
+        if water_info:
+            summary["water_depth"] = water_info
+        if started is not None:
+            started([j[0] for j in jobs], summary)
+        by_folder = {folder: name for name, folder in folders.items()}
+        tick = clock.perf_counter()
+
+        def done(folder: str, result) -> None:
+            name = by_folder[folder]
+            if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the study's
+                result = result.replace(str(workdir) + os.sep, "")
+            rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
+            if ended is not None:
+                ended(rows[name])
+
+        results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
+        # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
+        outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
+        table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
+        table_tags = table_tags.astype({c: "Int64" for c in COUNT_COLUMNS})  # counts as counts, empty where none
+        tracks = combined_tracks(outcomes, matrices)
+        summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
+                           "refused": int((table_tags["status"] == "refused").sum()),
+                           "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
+                                       if k}}
+        summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync)
+        summary["wall_time_s"] = clock.perf_counter() - begun
+        return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
+                            daily_counts(assigned.detections.frame))
+
+    speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
+    water_path = None if temperature_path is None else Path(temperature_path).absolute()
+    outcome = attempt(deployments, assigned, list(notes), workdir, refine_positions)
+    if refine_positions:
+        outcome = _refined(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER), deployments,
+                           assigned, survey_sigma, workdir)
+    outcome.summary["wall_time_s"] = clock.perf_counter() - begun
+    return outcome
+
+
+#: The folder a study on refined positions is made in, in the study's own (moved over the survey's when kept).
+REFINED_FOLDER = ".refined"
+
+
+def _moving(outcome: StudyOutcome) -> list[str]:
+    """The folders of a study's tags tracked as moving (never a reference tag)."""
+    return [row["folder"] for row in outcome.tags.to_dict("records")
+            if row["status"] == "tracked" and row["role"] != "reference" and row["motion"] == "moving"]
+
+
+def _refined(outcome: StudyOutcome, again: Callable, deployments: Deployments, assigned, survey_sigma: float,
+             workdir: Path) -> StudyOutcome:
+    """The study made again on the receivers' positions refined from its moving tags where the held-out pings say
+    it helps, kept where its reference and left-out sync tags are not worse (:mod:`.study_positions`); the other
+    study's tags' folders removed. ``summary["positions"]`` says what was done, ``positions`` is ``positions.csv``."""
+    synced = outcome.sync.positions if outcome.sync is not None and outcome.sync.positions is not None else None
+    start = {} if synced is None else {str(r.serial): (float(r.x_m), float(r.y_m))
+                                        for r in synced[synced["refined"].astype(bool)].itertuples()}
+    names = [str(n) for n in deployments.table["receiver"]]
+
+    def anchored(study: StudyOutcome):
+        return None if study.sync is None else sync_pings(study.sync.residuals, assigned.hydrophones, names)
+
+    try:
+        refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
+                                  start=start, anchored=anchored(outcome))
+    except ModelError as exc:
+        outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
+        outcome.summary["notes"].append(f"positions not refined: {exc}")
+        return outcome
+    if not refinement.helps:
+        refinement.summary["kept"] = False
+        outcome.summary["positions"], outcome.positions = refinement.summary, refinement.positions
+        return outcome
+    # the study made again on the refined positions (its clocks synchronised on them), the positions refined again
+    # from its tracks, in rounds until they settle
+    rounds = []
+    while True:
+        shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
+        second = again(*refinement.deployments(deployments, assigned))
+        rounds.append({"median_shift_m": refinement.summary["median_shift_m"],
+                       "largest_shift_m": refinement.summary["largest_shift_m"]})
+        if len(rounds) == ROUNDS:
+            break
         try:
-            key = match(name, detected)
-            if key is None:
-                raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
-            folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"  # never one of the study's own names
-            if folder in folders.values():
-                raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
-            mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
-            counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
-            row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
-                    "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
-            found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary",
-                            clocks_info["source"] == TOO_COARSE)
-            if found is not None:
-                rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
-                    counted.pings, counted.at_once, found[0])
-                continue
-            kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
-                    list(spec.burst_interval), "interval_s": spec.interval,
-                    "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
-            matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
-                                              spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
-            if matrix.summary.get("interval_warning"):
-                notes.append(f"tag {key}: {matrix.summary['interval_warning']}")
-            heard = np.isfinite(matrix.toa).sum(axis=1)
-            row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
-            _write_matrix(matrix, workdir / folder, notes)
-            matrices[folder] = matrix
-            folders[name] = folder
-            options = {"smooth": True, "sound_speed": sound_speed,
-                       "sound_speed_path": None if sound_speed_file is None else Path(sound_speed_file).absolute(),
-                       "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
-                       "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
-                       "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
-                       "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
-                       "force_interval": force_interval,
-                       "temperature_path": None if temperature_path is None else Path(temperature_path).absolute()}
-            if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
-                options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
-                                                            np.isfinite(matrix.toa).any(axis=0))
-                water_info["per_tag_m"][key] = options["water_depth"]
-            jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
-            row["folder"] = folder
-        except ModelError as exc:
-            code = code_of(str(exc))
-            row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"], code)
-        rows[name] = row
-    summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
-    summary["toa_noise"] = noise_info
-    if water_info:
-        summary["water_depth"] = water_info
-    if started is not None:
-        started([j[0] for j in jobs], summary)
-    by_folder = {folder: name for name, folder in folders.items()}
-    tick = clock.perf_counter()
-
-    def done(folder: str, result) -> None:
-        name = by_folder[folder]
-        if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the study's
-            result = result.replace(str(workdir) + os.sep, "")
-        rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
-        if ended is not None:
-            ended(rows[name])
-
-    results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
-    # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
-    outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
-    table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
-    table_tags = table_tags.astype({c: "Int64" for c in COUNT_COLUMNS})  # counts as counts, empty where none
-    tracks = combined_tracks(outcomes, matrices)
-    summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
-                       "refused": int((table_tags["status"] == "refused").sum()),
-                       "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
-                                   if k}}
-    summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync)
-    summary["wall_time_s"] = clock.perf_counter() - begun
-    return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
-                        daily_counts(assigned.detections.frame))
+            following = refine_study(second.outcomes, second.matrices, _moving(second), deployments, survey_sigma,
+                                     refinement.summary["held_out"], start, anchored(second))
+        except ModelError:
+            break
+        change = float(np.hypot(*(following.positions[["x", "y"]].to_numpy()
+                                  - refinement.positions[["x", "y"]].to_numpy()).T).max())
+        rounds[-1]["change_after_m"] = change
+        if change < ROUND_TOLERANCE:
+            break
+        following.first = refinement.first
+        refinement = following
+    refinement.summary["rounds"] = rounds
+    kept = refined_verdict(refinement, outcome.summary["reference_tags"], second.summary["reference_tags"])
+    chosen, other = (second, outcome) if kept else (outcome, second)
+    if kept:  # the refined study's tags' folders in the study's place
+        shutil.rmtree(workdir / TAGS_FOLDER, ignore_errors=True)
+        if (workdir / REFINED_FOLDER / TAGS_FOLDER).exists():
+            (workdir / REFINED_FOLDER / TAGS_FOLDER).rename(workdir / TAGS_FOLDER)
+    shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
+    del other
+    chosen.deployments = deployments  # receivers.csv: the deployments as read (positions.csv the refined)
+    chosen.summary["positions"], chosen.positions = refinement.summary, refinement.positions
+    return chosen
 
 
 def _water(deployments: Deployments, water_depth: float | None, notes: list[str]

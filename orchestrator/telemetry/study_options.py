@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from sblsim.models.sync.identifiability import SURVEY_SIGMA, SURVEY_SIGMA_RANGE
 from sblsim.models.tracking.timing import TOA_SIGMA_RANGE
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, names_argument, real_argument, text_argument
@@ -22,9 +23,26 @@ SOUND_SPEED = (1300.0, 1700.0)
 MAX_WORKERS = 256
 
 
+def survey_sigma_argument(value: Any, refine: bool, where: str) -> float:
+    """The survey σ [m] checked: in :data:`SURVEY_SIGMA_RANGE`, given only with the refinement (default
+    :data:`SURVEY_SIGMA`).
+
+    Raises
+    ------
+    ConfigError
+        Out of its range, or given without the refinement (one line naming ``where``).
+    """
+    if value is None:
+        return SURVEY_SIGMA
+    if not refine:
+        raise ConfigError(f"{where}: given without refining the positions; allowed: with "
+                          f"{'--refine-positions' if where.startswith('--') else 'refine_positions=True'}")
+    return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
+
+
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
              medium: tuple, names: dict[str, str], toa_sigma: Any = None, force_interval: Any = False,
-             tz: Any = None) -> dict[str, Any]:
+             tz: Any = None, refine_positions: Any = False, survey_sigma: Any = None) -> dict[str, Any]:
     """Every option of a study checked (``names``: how each is spelled where it was given; ``tz``, the study's IANA
     time zone, where given), as :func:`~sblsim.orchestrator.telemetry.study.run_study`'s keyword arguments."""
     if format is not None and format not in FORMATS:
@@ -46,7 +64,10 @@ def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, worker
             "scheduler": scheduler, "toa_sigma": None if toa_sigma is None else real_argument(
                 toa_sigma, names["toa_sigma"], *TOA_SIGMA_RANGE, "s"),
             "force_interval": flag_argument(force_interval, names["force_interval"]),
-            "tz": None if tz is None else study_zone(tz, names["tz"]).key}
+            "tz": None if tz is None else study_zone(tz, names["tz"]).key,
+            "refine_positions": flag_argument(refine_positions, names["refine_positions"]),
+            "survey_sigma": survey_sigma_argument(survey_sigma, bool(refine_positions), names["survey_sigma"])}
 
 
-__all__ = ["BIN_HOURS", "FORMATS", "MAX_WORKERS", "SOUND_SPEED"]
+__all__ = ["BIN_HOURS", "FORMATS", "MAX_WORKERS", "SOUND_SPEED",
+           "survey_sigma_argument"]

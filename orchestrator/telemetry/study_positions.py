@@ -1,0 +1,287 @@
+"""A study's receivers' positions refined from its own pings (``sblsim track --refine-positions``): first by the
+synchronisation with its sync tags (the clocks and the positions fitted together where the sync tags determine them:
+:func:`~sblsim.orchestrator.sync.run.synchronise`), then from the moving tags' pings pooled with the sync tags'
+emissions (:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`): the tags' places, each receiver's
+horizontal shift and the constant offset its clock keeps from a synchronisation made on wrong positions, and the
+sound speed where the tags' was calibrated from their pings (it took up the positions' error), the surveyed
+positions the prior (``--survey-sigma``).
+
+Taken only where the data say it helps: the moving tags' pings of each block of the record left out in turn fit the
+array refined without them better than the surveyed one (:func:`~sblsim.models.tracking.receiver_positions.held_out`),
+and only for the receivers the pings determine (the rest keep the sync tags' or the survey's). The study is then made
+again on the refined positions (the clocks synchronised on them, every tag tracked again), the positions refined again
+from it until they settle (:data:`ROUNDS`), and kept only where its reference tags and the sync tags left out in turn
+are not worse than on the first positions (:func:`verdict`): both studies' errors are said. The reference tags' pings
+are never in the refinement (they are the check). A translation or a rotation of the whole array changes no time of
+arrival, nor its scale where the sound speed is fitted too: those stay the survey's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.receiver_positions import HELD_OUT_GAIN, held_out, refine_receivers
+
+#: The rounds at most of a refinement (each: the study made again on the positions, its clocks synchronised on
+#: them, and the positions refined again from its tracks), and the largest change of a receiver's refined position
+#: [m] from one round to the next at which they stop.
+ROUNDS, ROUND_TOLERANCE = 4, 0.05
+#: The prior σ [1] of the sound speed's scale fitted with the positions where the tags' sound speeds were calibrated
+#: from their pings (1 %: 15 m/s).
+SPEED_SIGMA = 0.01
+#: The most a refined study's pooled reference or left-out sync-tag median error may exceed the survey's study's
+#: [1] and still be kept (the two studies' own noise on the same tags).
+WORSE_TOLERANCE = 0.05
+
+
+@dataclass
+class StudyRefinement:
+    """The receivers' positions refined from a study's moving tags (:func:`refine_study`).
+
+    Attributes
+    ----------
+    positions : pandas.DataFrame
+        ``positions.csv``: per deployment ``receiver``, the refined ``x``, ``y`` [m], the survey's ``survey_x``,
+        ``survey_y`` [m], ``shift_x``, ``shift_y``, ``shift_m`` [m], ``sigma_x``, ``sigma_y`` [m] (the fit's; NaN
+        where not refined), ``sigma_ratio`` [1] (the posterior σ in the array's shape over the survey's, worst
+        direction), ``arrivals`` (its arrivals in the fit), ``refined`` and ``reason`` (why not).
+    summary : dict
+        ``study.json``'s ``positions``: what was fitted, the held-out check, and (after :func:`verdict`) the reference
+        and sync tags' errors on both arrays and whether the refined one was kept.
+    """
+
+    positions: pd.DataFrame
+    summary: dict[str, Any]
+    first: pd.DataFrame | None = None  # the positions the survey's study was made on (x, y, source)
+
+    @property
+    def helps(self) -> bool:
+        """The held-out pings fit the refined array better and it moves a receiver."""
+        return bool(self.summary["held_out"]["helps"] and self.positions["refined"].any())
+
+    def deployments(self, deployments, assigned):
+        """The deployments and the assigned detections' hydrophones at the refined positions."""
+        shift = self.positions.set_index("receiver")[["shift_x", "shift_y"]]  # from the survey
+        table = deployments.table.copy()
+        moved = shift.reindex(table["receiver"]).fillna(0.0).to_numpy(float)
+        table[["x", "y"]] = table[["x", "y"]].to_numpy(float) + moved
+        hydrophones = assigned.hydrophones.copy()
+        moved = shift.reindex(hydrophones["receiver"]).fillna(0.0).to_numpy(float)
+        hydrophones[["x", "y"]] = hydrophones[["x", "y"]].to_numpy(float) + moved
+        return replace(deployments, table=table), replace(assigned, hydrophones=hydrophones)
+
+
+def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str], names: list[str]):
+    """The moving tags' pings pooled over the study's receivers: times of arrival (P, R) [s] (each tag's on its own
+    origin: every ping has its own emission time), each ping's place on its track (P, dim) [m] (NaN where the
+    track has none), its sound speed (P,) [m/s], each receiver's timing noise (R,) [s] and the tags used."""
+    column = {n: k for k, n in enumerate(names)}
+    parts, places, speeds, used = [], [], [], []
+    sigma = np.full(len(names), np.nan)
+    for folder in folders:
+        matrix, outcome = matrices[folder], outcomes[folder]
+        toa = np.full((len(matrix.toa), len(names)), np.nan)
+        at = [column[n] for n in matrix.names]
+        toa[:, at] = matrix.toa
+        dim = matrix.positions.shape[1]
+        estimates = outcome.estimates
+        main = estimates[estimates["estimator"] == outcome.summary["track"]].dropna(subset=["x", "y"])
+        place = np.full((len(toa), dim), np.nan)
+        axes = ["x", "y", "z"][:dim]
+        if all(a in main for a in axes):
+            place[main["ping"].to_numpy(int)] = main[axes].to_numpy(float)
+        noise = matrix.toa_sigma if matrix.toa_sigma is not None else np.full(
+            len(matrix.names), float(np.median(np.atleast_1d(outcome.summary["sigma_toa_s"]))))
+        sigma[at] = np.where(np.isfinite(sigma[at]), sigma[at], noise)
+        parts.append(toa)
+        places.append(place)
+        speeds.append(np.full(len(toa), float(outcome.summary["sound_speed"]["sound_speed_m_s"])))
+        used.append(matrix.summary["tag"])
+    sigma = np.where(np.isfinite(sigma), sigma, np.nanmedian(sigma) if np.isfinite(sigma).any() else 1.5e-4)
+    return np.vstack(parts), np.vstack(places), np.concatenate(speeds), sigma, used
+
+
+def sync_pings(residuals: pd.DataFrame | None, hydrophones: pd.DataFrame, names: list[str]
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The sync tags' emissions as the synchronisation heard them (its ``residuals``: ``receiver``, ``tag``,
+    ``emission``, ``time_sync`` on the reference clock, ``kept``), each from the receiver its tag sits at
+    (``hydrophones``' ``sync_tag``): times of arrival (Q, R) [s] over ``names`` (on the earliest's origin) and each
+    one's receiver (Q,); None where there are none."""
+    if residuals is None or not len(residuals):
+        return None
+    home = {str(t): str(r) for r, t in zip(hydrophones["receiver"], hydrophones["sync_tag"], strict=True) if t}
+    column = {n: k for k, n in enumerate(names)}
+    rows = residuals[residuals["kept"].astype(bool) & residuals["tag"].astype(str).isin(home)
+                     & residuals["receiver"].astype(str).isin(column)]
+    rows = rows[rows["tag"].astype(str).map(home).isin(column)]
+    if not len(rows):
+        return None
+    emission, at = np.unique(rows["tag"].astype(str) + "#" + rows["emission"].astype(str), return_inverse=True)
+    toa = np.full((len(emission), len(names)), np.nan)
+    times = rows["time_sync"].to_numpy(float)
+    toa[at, rows["receiver"].astype(str).map(column).to_numpy(int)] = times - times.min()
+    source = np.zeros(len(emission), int)
+    source[at] = rows["tag"].astype(str).map(home).map(column).to_numpy(int)
+    return toa, source
+
+
+def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: list[str], deployments,
+                 survey_sigma: float, held: dict[str, Any] | None = None,
+                 start: dict[str, tuple[float, float]] | None = None,
+                 anchored: tuple[np.ndarray, np.ndarray] | None = None) -> StudyRefinement:
+    """The receivers' positions refined from the moving tags' tracks (the module docstring).
+
+    Parameters
+    ----------
+    outcomes : dict
+        Each tracked tag's :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, by its folder.
+    matrices : dict
+        Each tag's times-of-arrival matrix (:class:`~sblsim.orchestrator.sync.toa.ToaOutcome`), by its folder.
+    moving : list of str
+        The folders of the tags tracked as moving (animals; never a reference tag).
+    deployments : Deployments
+        The study's deployments (their surveyed positions).
+    survey_sigma : float
+        [m] the survey's σ per horizontal axis.
+    held : dict, optional
+        An earlier round's held-out check (its ``summary["held_out"]``), taken instead of checking again (a round on
+        the clocks synchronised on refined positions: :func:`~sblsim.orchestrator.telemetry.study.run_study`).
+    start : dict, optional
+        Receiver → (x, y) [m]: the positions the study was made on where they are not the survey's (the sync tags'
+        refinement, an earlier round's), kept by a receiver the pings do not refine.
+    anchored : (numpy.ndarray, numpy.ndarray), optional
+        The sync tags' emissions as :func:`sync_pings` gives them: fitted with the moving tags' pings, each
+        receiver's clock offset with its position (both directions of a pair of receivers heard).
+
+    Returns
+    -------
+    StudyRefinement
+
+    Raises
+    ------
+    ModelError
+        No moving tag tracked, or none heard by four receivers at once (one line).
+    """
+    if not moving:
+        raise ModelError("refine positions: no moving tag was tracked (the reference tags are the check, never in "
+                         "the refinement); allowed: a study with a moving tag heard by four receivers at once, or "
+                         "the surveyed positions (without --refine-positions)")
+    table = deployments.table
+    names = [str(n) for n in table["receiver"]]
+    axes = ["x", "y", "z"][:matrices[moving[0]].positions.shape[1]]
+    receivers = table[axes].to_numpy(float)
+    toa, places, c, sigma, tags = _pings(outcomes, matrices, moving, names)
+    biases = anchored is not None  # the clocks' offsets the synchronisation left, told apart by its sync tags
+    # a sound speed calibrated from the pings on the surveyed positions took up their error: fitted with them
+    calibrated = all(str(outcomes[f].summary["sound_speed"]["source"]).startswith(("calibrated", "fallback"))
+                     for f in moving)
+    speed = SPEED_SIGMA if calibrated else None
+    fit = refine_receivers(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
+                           speed_sigma=speed)
+    if held is None:
+        check = held_out(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
+                         speed_sigma=speed)
+        held = {"survey_chi2_per_dof": check.surveyed, "refined_chi2_per_dof": check.refined, "pings": check.pings,
+                "folds": check.folds.tolist(), "helps": check.helps,
+                "rule": f"the refined array's median chi2 per degree of freedom of the pings left out at most "
+                        f"{1 - HELD_OUT_GAIN:g} of the survey's, and lower in most blocks"}
+    cov = fit.covariance
+    sx, sy = np.sqrt(np.diag(cov)[0::2]), np.sqrt(np.diag(cov)[1::2])
+    refined = fit.determined & held["helps"]
+    reason = np.where(fit.arrivals == 0, "not heard by a moving tag with three others at once",
+                      np.where(~fit.determined, [f"its posterior sigma {r:.2f} of the survey's in the array's shape "
+                                                 "(needs < 0.5)" for r in fit.sigma_ratio],
+                               np.where(refined, "", "the held-out pings fit the refined array no better")))
+    start = start or {}
+    before = np.array([start.get(n, (x, y)) for n, x, y in zip(names, receivers[:, 0], receivers[:, 1],
+                                                                strict=True)], float).reshape(-1, 2)
+    at = np.where(refined[:, None], receivers[:, :2] + fit.shift, before)
+    source = np.where(refined, "moving tags' pings", np.where(np.isin(names, list(start)), "sync tags", "survey"))
+    positions = pd.DataFrame({
+        "receiver": names, "x": at[:, 0], "y": at[:, 1], "survey_x": receivers[:, 0], "survey_y": receivers[:, 1],
+        "shift_x": at[:, 0] - receivers[:, 0], "shift_y": at[:, 1] - receivers[:, 1],
+        "shift_m": np.hypot(at[:, 0] - receivers[:, 0], at[:, 1] - receivers[:, 1]), "source": source,
+        "sigma_x": np.where(refined, sx, np.nan), "sigma_y": np.where(refined, sy, np.nan),
+        "sigma_ratio": fit.sigma_ratio, "arrivals": fit.arrivals.astype(int),
+        "fitted_shift_m": np.hypot(fit.fitted[:, 0], fit.fitted[:, 1]), "refined": refined, "reason": reason})
+    moved = positions[positions["refined"]]
+    summary = {"by_sync_tags": int((source == "sync tags").sum()), "sync_emissions": fit.anchored,
+               "clock_offsets_fitted": biases,
+               "sound_speed": ({"fitted": True, "scale": fit.speed_scale, "scale_sigma": fit.speed_scale_sigma,
+                                "why": "the tags' sound speeds were calibrated from their pings on the surveyed "
+                                       "positions; the array's scale is then the survey's (a gauge)"}
+                               if calibrated else {"fitted": False, "why": "given or measured: the array's scale is "
+                                                                           "the pings'"}),
+        "survey_sigma_m": survey_sigma, "tags": tags, "pings": fit.pings, "receivers": len(names),
+        "determined": int(fit.determined.sum()), "refined": int(refined.sum()),
+        "median_shift_m": float(moved["shift_m"].median()) if len(moved) else 0.0,
+        "largest_shift_m": float(moved["shift_m"].max()) if len(moved) else 0.0,
+        "largest_shift_receiver": str(moved.loc[moved["shift_m"].idxmax(), "receiver"]) if len(moved) else "",
+        "converged": fit.converged, "iterations": fit.iterations,
+        "held_out": held,
+        "gauge": "a translation or a rotation of the whole array changes no time of arrival: the survey's kept"}
+    first = pd.DataFrame({"x": before[:, 0], "y": before[:, 1],
+                          "source": np.where(np.isin(names, list(start)), "sync tags", "survey")})
+    return StudyRefinement(positions, summary, first)
+
+
+def _errors(references: dict[str, Any] | None) -> dict[str, float | None]:
+    """The pooled reference tags' and left-out sync tags' median errors [m] of a study's ``reference_tags``."""
+    references = references or {}
+    return {key: (references.get(key) or {}).get("median_error_m") for key in ("reference", "sync_left_out")}
+
+
+def verdict(refinement: StudyRefinement, surveyed: dict[str, Any] | None, refined: dict[str, Any] | None) -> bool:
+    """Whether the study on the refined positions is kept: none of its pooled reference tags' and left-out sync
+    tags' median errors more than :data:`WORSE_TOLERANCE` above the survey's study's (both written in the summary's
+    ``checks``, and ``kept``)."""
+    before, after = _errors(surveyed), _errors(refined)
+    worse = [k for k in before if before[k] is not None and after[k] is not None
+             and after[k] > (1.0 + WORSE_TOLERANCE) * before[k]]
+    refinement.summary["checks"] = {k: {"survey_m": before[k], "refined_m": after[k]} for k in before}
+    refinement.summary["kept"] = not worse
+    refinement.summary["worse"] = worse
+    if worse:  # the survey's positions stand: positions.csv says so, with what the pings would have moved
+        p = refinement.positions
+        why = f"the {' and '.join(worse)} errors are worse on the refined positions"
+        p.loc[p["refined"], "reason"] = why
+        p[["x", "y"]] = refinement.first[["x", "y"]].to_numpy()
+        p[["shift_x", "shift_y"]] = p[["x", "y"]].to_numpy() - p[["survey_x", "survey_y"]].to_numpy()
+        p["shift_m"] = np.hypot(p["shift_x"], p["shift_y"])
+        p[["sigma_x", "sigma_y"]] = np.nan
+        p["source"] = refinement.first["source"].to_numpy()
+        p["refined"] = False
+    return not worse
+
+
+def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
+    """The console's lines of a refinement (a warning where the survey's positions were kept)."""
+    if not summary:
+        return []
+    held = summary["held_out"]
+    head = (f"positions: {summary['refined']} of {summary['receivers']} receivers refined from {len(summary['tags'])} "
+            f"moving tags' {summary['pings']:,} pings (survey sigma {summary['survey_sigma_m']:g} m)")
+    out = [(head + (f", median shift {summary['median_shift_m']:.2f} m, largest {summary['largest_shift_m']:.2f} m "
+                    f"({summary['largest_shift_receiver']})" if summary["refined"] else ""), False),
+           (f"  held-out pings' chi2 per degree of freedom: {held['survey_chi2_per_dof']:.3g} on the survey's "
+            f"positions, {held['refined_chi2_per_dof']:.3g} on the refined", False)]
+    for key, label in (("reference", "reference tags'"), ("sync_left_out", "sync tags' (left out)")):
+        got = (summary.get("checks") or {}).get(key) or {}
+        if got.get("survey_m") is not None and got.get("refined_m") is not None:
+            out.append((f"  {label} median error: {got['survey_m']:.2f} m on the survey's positions, "
+                        f"{got['refined_m']:.2f} m on the refined", False))
+    if not summary.get("kept", False):
+        why = ("the held-out pings fit the refined array no better" if not held["helps"] or not summary["refined"]
+               else f"the {' and '.join(summary.get('worse') or [])} errors are worse on it")
+        out.append((f"warning: positions not refined: {why}; the survey's positions kept (positions.csv says "
+                    "what the pings would move)", True))
+    return out
+
+
+__all__ = ["ROUNDS", "ROUND_TOLERANCE", "SPEED_SIGMA", "StudyRefinement", "WORSE_TOLERANCE", "lines", "refine_study",
+           "sync_pings", "verdict"]
