@@ -263,18 +263,21 @@ def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
     """The console's lines of a refinement (a warning where the survey's positions were kept)."""
     if not summary:
         return []
+    if "held_out" not in summary:  # nothing to refine from
+        return [(f"warning: positions not refined: {summary.get('reason', '')}", True)]
     held = summary["held_out"]
-    head = (f"positions: {summary['refined']} of {summary['receivers']} receivers refined from {len(summary['tags'])} "
+    done = "refined" if summary.get("kept") else "the pings would move"
+    head = (f"positions: {summary['refined']} of {summary['receivers']} receivers {done} from {len(summary['tags'])} "
             f"moving tags' {summary['pings']:,} pings (survey sigma {summary['survey_sigma_m']:g} m)")
     out = [(head + (f", median shift {summary['median_shift_m']:.2f} m, largest {summary['largest_shift_m']:.2f} m "
                     f"({summary['largest_shift_receiver']})" if summary["refined"] else ""), False),
-           (f"  held-out pings' chi2 per degree of freedom: {held['survey_chi2_per_dof']:.3g} on the survey's "
+           (f"  held-out pings' chi2 per degree of freedom: {held['survey_chi2_per_dof']:.3g} on the surveyed "
             f"positions, {held['refined_chi2_per_dof']:.3g} on the refined", False)]
     for key, label in (("reference", "reference tags'"), ("sync_left_out", "sync tags' (left out)")):
         got = (summary.get("checks") or {}).get(key) or {}
         if got.get("survey_m") is not None and got.get("refined_m") is not None:
-            out.append((f"  {label} median error: {got['survey_m']:.2f} m on the survey's positions, "
-                        f"{got['refined_m']:.2f} m on the refined", False))
+            out.append((f"  {label} median error: {got['survey_m']:.2f} m before the refinement, "
+                        f"{got['refined_m']:.2f} m after", False))
     if not summary.get("kept", False):
         why = ("the held-out pings fit the refined array no better" if not held["helps"] or not summary["refined"]
                else f"the {' and '.join(summary.get('worse') or [])} errors are worse on it")
