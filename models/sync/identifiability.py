@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from sblsim.models.declarations import ModelError
 
@@ -136,7 +135,9 @@ def shape_sigma_ratio(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.
     for k, j in enumerate(inside):
         b = slice(2 * k, 2 * k + 2)
         try:
-            worst = scipy.linalg.eigh(posterior[b, b], prior[b, b], eigvals_only=True)[-1]
+            # the generalised eigenvalues of (posterior, prior): those of L⁻¹ P L⁻ᵀ, L the prior's Cholesky factor
+            lower = np.linalg.cholesky(prior[b, b])
+            worst = np.linalg.eigvalsh(np.linalg.solve(lower, np.linalg.solve(lower, posterior[b, b]).T))[-1]
         except np.linalg.LinAlgError:  # the prior's shape variance singular there (collinear or coincident)
             continue
         ratio[j] = float(np.sqrt(max(worst, 0.0)))

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import time as clock
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -45,7 +44,6 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
-from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.assign import assign
@@ -57,16 +55,14 @@ from sblsim.orchestrator.readers.study_files import read_study, study_files
 from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, spec_for
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.readers.water import read_temperature_series
-from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
-from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.report.daily import daily_counts
-from sblsim.orchestrator.telemetry.study_positions import ROUND_TOLERANCE, ROUNDS, refine_study, sync_pings
-from sblsim.orchestrator.telemetry.study_positions import verdict as refined_verdict
+from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, study_clocks
+from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
@@ -130,71 +126,6 @@ class StudyOutcome:
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
 #: never one of the study's own files).
 TAGS_FOLDER = "tags"
-#: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
-TOO_COARSE = "as logged (times too coarse to synchronise)"
-
-
-def _clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
-            series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str], refine: bool = False,
-            survey_sigma: float = SURVEY_SIGMA):
-    """The clocks (module docstring, step 2): the clocks, the receivers table they go with, what was done, and the
-    synchronisation made here (or None). With ``refine`` the synchronisation refines the receivers' positions with
-    the clocks where its sync tags determine them (:func:`~sblsim.orchestrator.sync.run.synchronise`; said in a note
-    where they determine none), and the table is theirs."""
-    table = assigned.hydrophones
-    if sync_dir is not None:
-        clocks = read_clocks(sync_dir)
-        refined = read_positions(sync_dir)
-        table, _ = with_positions(table, refined)
-        missing = sorted(set(table["receiver"]) - set(clocks.receivers))
-        return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
-                               "receivers": len(clocks.receivers),
-                               "not_synchronised": missing,
-                               "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
-    rounded = None
-    if (table["sync_tag"] != "").any() and len(table) > 1:
-        def synchronised(refine: bool):
-            return synchronise(assigned.detections, table, sound_speed, series, bin_hours,
-                               receivers_file=deployments.source, alternatives=deployments.alternatives(),
-                               refine_positions=refine, survey_sigma=survey_sigma)
-
-        try:
-            try:
-                outcome = synchronised(refine)
-            except RoundingError:
-                raise
-            except ModelError as exc:  # the sync tags determine no position: the clocks on the table's
-                if not refine:
-                    raise
-                notes.append(f"the sync tags refine no receiver's position: {exc}")
-                outcome = synchronised(False)
-        except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
-            rounded = str(exc)
-        else:
-            s = outcome.summary
-            notes.extend(s.get("warnings", []))  # each clock break found, in one line
-            if outcome.positions is not None:  # the clocks fitted with the positions the sync tags refined
-                moved = outcome.positions[outcome.positions["refined"].astype(bool)]
-                table, _ = with_positions(table, {str(r.serial): (float(r.x_m), float(r.y_m))
-                                                  for r in moved.itertuples()})
-            return offsets_clocks(outcome.offsets), table, {
-                "source": "synchronised here", "reference_receiver": s["reference_receiver"],
-                "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
-                "clock_breaks": s["clock_breaks"],
-                "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
-                "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
-    times = assigned.detections.frame["time"].to_numpy(float)
-    alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
-    notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
-                 "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
-                 "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
-                 "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
-    source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone
-              else "as logged (no sync tag)")
-    return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
-        table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
-
-
 def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Detections,
             sync_tags: set[str]) -> list[tuple[str, TagSpec]]:
     """The tags to track (module docstring, step 3): each as named, with its spec."""
@@ -334,7 +265,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     def attempt(deployments, assigned, notes: list[str], workdir: Path, refine: bool = False) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``;
         ``refine``: the synchronisation refines the positions with its sync tags."""
-        clocks, table, clocks_info, synced = _clocks(sync, assigned, deployments, sound_speed, series, bin_hours,
+        clocks, table, clocks_info, synced = study_clocks(sync, assigned, deployments, sound_speed, series, bin_hours,
                                                      notes, refine, survey_sigma)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
@@ -428,80 +359,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
     outcome = attempt(deployments, assigned, list(notes), workdir, refine_positions)
     if refine_positions:
-        outcome = _refined(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER), deployments,
-                           assigned, survey_sigma, workdir)
+        outcome = refined_study(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER),
+                                deployments, assigned, survey_sigma, workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun
     return outcome
-
-
-#: The folder a study on refined positions is made in, in the study's own (moved over the survey's when kept).
-REFINED_FOLDER = ".refined"
-
-
-def _moving(outcome: StudyOutcome) -> list[str]:
-    """The folders of a study's tags tracked as moving (never a reference tag)."""
-    return [row["folder"] for row in outcome.tags.to_dict("records")
-            if row["status"] == "tracked" and row["role"] != "reference" and row["motion"] == "moving"]
-
-
-def _refined(outcome: StudyOutcome, again: Callable, deployments: Deployments, assigned, survey_sigma: float,
-             workdir: Path) -> StudyOutcome:
-    """The study made again on the receivers' positions refined from its moving tags where the held-out pings say
-    it helps, kept where its reference and left-out sync tags are not worse (:mod:`.study_positions`); the other
-    study's tags' folders removed. ``summary["positions"]`` says what was done, ``positions`` is ``positions.csv``."""
-    synced = outcome.sync.positions if outcome.sync is not None and outcome.sync.positions is not None else None
-    start = {} if synced is None else {str(r.serial): (float(r.x_m), float(r.y_m))
-                                        for r in synced[synced["refined"].astype(bool)].itertuples()}
-    names = [str(n) for n in deployments.table["receiver"]]
-
-    def anchored(study: StudyOutcome):
-        return None if study.sync is None else sync_pings(study.sync.residuals, assigned.hydrophones, names)
-
-    try:
-        refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
-                                  start=start, anchored=anchored(outcome))
-    except ModelError as exc:
-        outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
-        outcome.summary["notes"].append(f"positions not refined: {exc}")
-        return outcome
-    if not refinement.helps:
-        refinement.summary["kept"] = False
-        outcome.summary["positions"], outcome.positions = refinement.summary, refinement.positions
-        return outcome
-    # the study made again on the refined positions (its clocks synchronised on them), the positions refined again
-    # from its tracks, in rounds until they settle
-    rounds = []
-    while True:
-        shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
-        second = again(*refinement.deployments(deployments, assigned))
-        rounds.append({"median_shift_m": refinement.summary["median_shift_m"],
-                       "largest_shift_m": refinement.summary["largest_shift_m"]})
-        if len(rounds) == ROUNDS:
-            break
-        try:
-            following = refine_study(second.outcomes, second.matrices, _moving(second), deployments, survey_sigma,
-                                     refinement.summary["held_out"], start, anchored(second))
-        except ModelError:
-            break
-        change = float(np.hypot(*(following.positions[["x", "y"]].to_numpy()
-                                  - refinement.positions[["x", "y"]].to_numpy()).T).max())
-        rounds[-1]["change_after_m"] = change
-        if change < ROUND_TOLERANCE:
-            break
-        following.first = refinement.first
-        refinement = following
-    refinement.summary["rounds"] = rounds
-    kept = refined_verdict(refinement, outcome.summary["reference_tags"], second.summary["reference_tags"])
-    chosen, other = (second, outcome) if kept else (outcome, second)
-    if kept:  # the refined study's tags' folders in the study's place
-        shutil.rmtree(workdir / TAGS_FOLDER, ignore_errors=True)
-        if (workdir / REFINED_FOLDER / TAGS_FOLDER).exists():
-            (workdir / REFINED_FOLDER / TAGS_FOLDER).rename(workdir / TAGS_FOLDER)
-    shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
-    del other
-    chosen.deployments = deployments  # receivers.csv: the deployments as read (positions.csv the refined)
-    chosen.summary["positions"], chosen.positions = refinement.summary, refinement.positions
-    return chosen
 
 
 def _water(deployments: Deployments, water_depth: float | None, notes: list[str]

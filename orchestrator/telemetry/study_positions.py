@@ -18,8 +18,10 @@ arrival, nor its scale where the sound speed is fitted too: those stay the surve
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass, replace
-from typing import Any
+from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
@@ -259,6 +261,78 @@ def verdict(refinement: StudyRefinement, surveyed: dict[str, Any] | None, refine
     return not worse
 
 
+#: The folder a study on refined positions is made in, in the study's own (moved over the survey's when kept).
+REFINED_FOLDER = ".refined"
+
+
+def _moving(outcome) -> list[str]:
+    """The folders of a study's tags tracked as moving (never a reference tag)."""
+    return [row["folder"] for row in outcome.tags.to_dict("records")
+            if row["status"] == "tracked" and row["role"] != "reference" and row["motion"] == "moving"]
+
+
+def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,
+                  tags_folder: str):
+    """A study (:class:`~sblsim.orchestrator.telemetry.study.StudyOutcome`) made again by ``again(deployments,
+    assigned)`` (into ``workdir``'s :data:`REFINED_FOLDER`) on the receivers' positions refined from its moving tags
+    where the held-out pings say it helps, in rounds, and kept where its reference and left-out sync tags are not
+    worse (the module docstring); its tags' folders (``tags_folder``) moved over the first study's where kept. The
+    study returned says what was done (``summary["positions"]``; ``positions``: ``positions.csv``)."""
+    synced = outcome.sync.positions if outcome.sync is not None and outcome.sync.positions is not None else None
+    start = {} if synced is None else {str(r.serial): (float(r.x_m), float(r.y_m))
+                                        for r in synced[synced["refined"].astype(bool)].itertuples()}
+    names = [str(n) for n in deployments.table["receiver"]]
+
+    def anchored(study):
+        return None if study.sync is None else sync_pings(study.sync.residuals, assigned.hydrophones, names)
+
+    try:
+        refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
+                                  start=start, anchored=anchored(outcome))
+    except ModelError as exc:
+        outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
+        outcome.summary["notes"].append(f"positions not refined: {exc}")
+        return outcome
+    if not refinement.helps:
+        refinement.summary["kept"] = False
+        outcome.summary["positions"], outcome.positions = refinement.summary, refinement.positions
+        return outcome
+    # the study made again on the refined positions (its clocks synchronised on them), the positions refined again
+    # from its tracks, in rounds until they settle
+    rounds = []
+    while True:
+        shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
+        second = again(*refinement.deployments(deployments, assigned))
+        rounds.append({"median_shift_m": refinement.summary["median_shift_m"],
+                       "largest_shift_m": refinement.summary["largest_shift_m"]})
+        if len(rounds) == ROUNDS:
+            break
+        try:
+            following = refine_study(second.outcomes, second.matrices, _moving(second), deployments, survey_sigma,
+                                     refinement.summary["held_out"], start, anchored(second))
+        except ModelError:
+            break
+        change = float(np.hypot(*(following.positions[["x", "y"]].to_numpy()
+                                  - refinement.positions[["x", "y"]].to_numpy()).T).max())
+        rounds[-1]["change_after_m"] = change
+        if change < ROUND_TOLERANCE:
+            break
+        following.first = refinement.first
+        refinement = following
+    refinement.summary["rounds"] = rounds
+    kept = verdict(refinement, outcome.summary["reference_tags"], second.summary["reference_tags"])
+    chosen, other = (second, outcome) if kept else (outcome, second)
+    if kept:  # the refined study's tags' folders in the study's place
+        shutil.rmtree(workdir / tags_folder, ignore_errors=True)
+        if (workdir / REFINED_FOLDER / tags_folder).exists():
+            (workdir / REFINED_FOLDER / tags_folder).rename(workdir / tags_folder)
+    shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
+    del other
+    chosen.deployments = deployments  # receivers.csv: the deployments as read (positions.csv the refined)
+    chosen.summary["positions"], chosen.positions = refinement.summary, refinement.positions
+    return chosen
+
+
 def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
     """The console's lines of a refinement (a warning where the survey's positions were kept)."""
     if not summary:
@@ -286,5 +360,5 @@ def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
     return out
 
 
-__all__ = ["ROUNDS", "ROUND_TOLERANCE", "SPEED_SIGMA", "StudyRefinement", "WORSE_TOLERANCE", "lines", "refine_study",
-           "sync_pings", "verdict"]
+__all__ = ["REFINED_FOLDER", "ROUNDS", "ROUND_TOLERANCE", "SPEED_SIGMA", "StudyRefinement", "WORSE_TOLERANCE", "lines",
+           "refine_study", "refined_study", "sync_pings", "verdict"]

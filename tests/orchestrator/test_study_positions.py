@@ -6,8 +6,6 @@ left as it is, and with a measured sound speed the array's scale found too."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 import pytest

@@ -17,7 +17,7 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_UTM
 from sblsim.orchestrator.telemetry.report.figures_study import summary_value
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
-from sblsim.orchestrator.telemetry.study import TOO_COARSE
+from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
 from sblsim.orchestrator.telemetry.study_report import reference_lines, tag_lines
 
 #: The options that set a tag's sound speed (``sblsim track``'s).

@@ -1,0 +1,92 @@
+"""A telemetry study's clocks (:func:`study_clocks`): a synchronisation's folder given (its ``offsets.csv``, its
+refined positions where it has them); else synchronised here from the deployments' sync tags
+(:func:`~sblsim.orchestrator.sync.run.synchronise`, refining the positions with the clocks where asked); else, where no
+deployment has a sync tag or the times are too coarse, taken as logged (said).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
+from sblsim.models.sync.resolution import RoundingError
+from sblsim.orchestrator.readers.deployments import Deployments
+from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
+from sblsim.orchestrator.sync.run import synchronise
+
+#: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
+TOO_COARSE = "as logged (times too coarse to synchronise)"
+
+
+def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
+                 series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
+                 refine: bool = False, survey_sigma: float = SURVEY_SIGMA):
+    """A study's clocks (:mod:`sblsim.orchestrator.telemetry.study`, step 2): the clocks, the receivers table they go
+    with, what was done, and the synchronisation made here (or None). With ``refine`` the synchronisation refines the
+    receivers' positions with the clocks where its sync tags determine them
+    (:func:`~sblsim.orchestrator.sync.run.synchronise`; said in a note where they determine none), and the table is
+    theirs.
+
+    Raises
+    ------
+    ModelError
+        A synchronisation that cannot be made, or a folder's files refused (one line).
+    """
+    table = assigned.hydrophones
+    if sync_dir is not None:
+        clocks = read_clocks(sync_dir)
+        refined = read_positions(sync_dir)
+        table, _ = with_positions(table, refined)
+        missing = sorted(set(table["receiver"]) - set(clocks.receivers))
+        return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
+                               "receivers": len(clocks.receivers),
+                               "not_synchronised": missing,
+                               "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
+    rounded = None
+    if (table["sync_tag"] != "").any() and len(table) > 1:
+        def synchronised(refine: bool):
+            return synchronise(assigned.detections, table, sound_speed, series, bin_hours,
+                               receivers_file=deployments.source, alternatives=deployments.alternatives(),
+                               refine_positions=refine, survey_sigma=survey_sigma)
+
+        try:
+            try:
+                outcome = synchronised(refine)
+            except RoundingError:
+                raise
+            except ModelError as exc:  # the sync tags determine no position: the clocks on the table's
+                if not refine:
+                    raise
+                notes.append(f"the sync tags refine no receiver's position: {exc}")
+                outcome = synchronised(False)
+        except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
+            rounded = str(exc)
+        else:
+            s = outcome.summary
+            notes.extend(s.get("warnings", []))  # each clock break found, in one line
+            if outcome.positions is not None:  # the clocks fitted with the positions the sync tags refined
+                moved = outcome.positions[outcome.positions["refined"].astype(bool)]
+                table, _ = with_positions(table, {str(r.serial): (float(r.x_m), float(r.y_m))
+                                                  for r in moved.itertuples()})
+            return offsets_clocks(outcome.offsets), table, {
+                "source": "synchronised here", "reference_receiver": s["reference_receiver"],
+                "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
+                "clock_breaks": s["clock_breaks"],
+                "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
+                "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
+    times = assigned.detections.frame["time"].to_numpy(float)
+    alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
+    notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
+                 "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
+                 "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
+                 "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
+    source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone
+              else "as logged (no sync tag)")
+    return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
+        table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
+
+
+__all__ = ["TOO_COARSE", "study_clocks"]
