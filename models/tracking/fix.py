@@ -332,9 +332,7 @@ def _gauss_newton_pings(toa, filled, used, receivers, c, p, te, prior=None, rela
         Jw = J[moving] * used[moving][:, :, None]
         normal = np.einsum("mki,mkj->mij", Jw, Jw) + 1e-12 * np.eye(dim + 1)
         step = np.linalg.solve(normal, np.einsum("mki,mk->mi", Jw, res[moving])[..., None])[..., 0]
-        # converged: a step below a micrometre, the emission time's too (in metres: a start at the place's optimum
-        # still has its emission time to fit)
-        big = np.maximum(np.abs(step[:, :-1]).max(axis=1), np.abs(step[:, -1]) * np.min(c)) >= 1e-6
+        big = np.abs(step[:, :-1]).max(axis=1) >= 1e-6  # converged: a step below a micrometre
         moving, step = moving[big], step[big]
         trying, scale = np.arange(len(moving)), 1.0  # places in moving
         for _halving in range(10):

@@ -82,6 +82,18 @@ def output_folder(given: Path | None, default: Path, force: bool, marker: str, w
     return out
 
 
+def add_refinement(p: argparse.ArgumentParser, what: str) -> None:
+    """``--refine-positions`` (``what`` it refines them with) and ``--survey-sigma`` (its prior)."""
+    from sblsim.models.sync.identifiability import SURVEY_SIGMA
+
+    p.add_argument("--refine-positions", action="store_true",
+                   help=f"refine the receivers' horizontal positions {what} (a prior of --survey-sigma at the "
+                        "table's); writes positions.csv")
+    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
+                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000] (default {SURVEY_SIGMA:g}: a "
+                        "handheld GPS's); only with --refine-positions")
+
+
 def add_receivers(p: argparse.ArgumentParser, required: bool = True) -> None:
     """``--receivers``, ``--crs``, ``--frame``: a study's receivers and where they are (``--receivers`` optional
     where the command finds them otherwise: ``sblsim track``'s actel workspace)."""

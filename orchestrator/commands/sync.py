@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sblsim.models.sync.identifiability import SURVEY_SIGMA
-from sblsim.orchestrator.commands.console import add_receivers, output_folder
+from sblsim.orchestrator.commands.console import add_receivers, add_refinement, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
@@ -196,12 +195,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the time bins' width [h] in [0.05, 168] (one drift per receiver and bin; default 1)")
     p.add_argument("--reference", default=None, metavar="SERIAL",
                    help="the reference receiver (default: the one with the most arrivals shared with others)")
-    p.add_argument("--refine-positions", action="store_true",
-                   help="refine the receivers' horizontal positions with the clocks (a prior of --survey-sigma at "
-                   "the table's); writes positions.csv")
-    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
-                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000] (default {SURVEY_SIGMA:g}: a "
-                   "handheld GPS's); only with --refine-positions")
+    add_refinement(p, "with the clocks")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/sync_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
 

@@ -11,14 +11,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.commands.common import add_water_arguments
-from sblsim.orchestrator.commands.console import add_receivers, output_folder
+from sblsim.orchestrator.commands.console import add_receivers, add_refinement, output_folder
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.telemetry.study_options import FORMATS, _options
-from sblsim.orchestrator.telemetry.study_report import closing_line, reference_lines, tag_lines
+from sblsim.orchestrator.telemetry.study_report import closing_line, study_lines
 from sblsim.orchestrator.telemetry.study_run import _run
 from sblsim.orchestrator.tracks.options import sound_speed_arguments, water_arguments
 from sblsim.orchestrator.tracks.outputs import figure
@@ -157,14 +156,9 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         Take a tag's stated interval (the sheet's) where its detections contradict it as a whole: a note says how
         many detections it drops; without it such a tag is a refused row of ``tags.csv`` naming the interval its
         detections show.
-    refine_positions : bool
-        Refine the receivers' horizontal positions from the moving tags' own pings (the tracks and the positions
-        solved together, the surveyed positions as priors) and make the study again on them, kept only where the
-        pings left out fit them better and the reference and left-out sync tags are not worse (both said;
-        ``positions.csv``, ``summary["positions"]``: :mod:`sblsim.orchestrator.telemetry.study_positions`).
-    survey_sigma : float, optional
-        The surveyed positions' σ per horizontal axis [m] in [0.01, 1000] (default 3: a handheld GPS's); only with
-        ``refine_positions``.
+    refine_positions, survey_sigma : bool, float
+        Refine the receivers' positions from the study's pings, tracking again on them where that helps
+        (:mod:`sblsim.orchestrator.telemetry.study_positions`); the survey's σ per axis [m] in [0.01, 1000], 3.
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
@@ -267,13 +261,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force-interval", action="store_true",
                    help="take a tag's stated interval (the sheet's) where its detections contradict it as a whole "
                         "(that tag refused otherwise); a note says how many detections it drops")
-    p.add_argument("--refine-positions", action="store_true",
-                   help="refine the receivers' horizontal positions from the moving tags' own pings (the surveyed "
-                        "positions as priors) and track again on them where the pings left out and the reference "
-                        "tags say it helps; writes positions.csv")
-    p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
-                   help=f"the receivers' surveyed positions' sigma per horizontal axis [m] in [0.01, 1000] (default "
-                        f"{SURVEY_SIGMA:g}: a handheld GPS's); only with --refine-positions")
+    add_refinement(p, "by the sync tags and the moving tags' pings, and track again on them where the pings "
+                      "left out and the reference tags say it helps")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/study_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier study in --out")
 
@@ -296,9 +285,7 @@ def main(args: argparse.Namespace) -> int:
 
     detections = args.detections[0] if len(args.detections) == 1 else DetectionFiles(args.detections)
     outcome = _run(detections, args.receivers, args.tags, args.sync, options, out, "auto", lines=True)
-    from sblsim.orchestrator.telemetry.study_positions import lines as position_lines
-    for line, warning in (tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
-                          + position_lines(outcome.summary.get("positions"))):
+    for line, warning in study_lines(outcome):
         print(line, file=sys.stderr if warning else sys.stdout)
     for note in outcome.summary["notes"]:
         print(f"note: {note}", file=sys.stderr)

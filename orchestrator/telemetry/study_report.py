@@ -156,4 +156,15 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
         f"written to {out}/ ({files})"
 
 
-__all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "reference_lines", "tag_line", "tag_lines"]
+def study_lines(outcome: Any) -> list[tuple[str, bool]]:
+    """The console's lines of a study once it has run, each with whether it is for standard error: its tags'
+    (:func:`tag_lines`), its reference tags' (:func:`reference_lines`) and its refined positions'
+    (:func:`~sblsim.orchestrator.telemetry.study_positions.lines`)."""
+    from sblsim.orchestrator.telemetry.study_positions import lines  # numpy and pandas: loaded with the study
+
+    return (tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
+            + lines(outcome.summary.get("positions")))
+
+
+__all__ = ["MAX_REFUSED_LINES", "closing_line", "opening_lines", "reference_lines", "study_lines", "tag_line",
+           "tag_lines"]

@@ -18,6 +18,7 @@ from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_UTM
 from sblsim.orchestrator.telemetry.report.figures_study import summary_value
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
+from sblsim.orchestrator.telemetry.study_positions import lines as position_lines
 from sblsim.orchestrator.telemetry.study_report import reference_lines, tag_lines
 
 #: The options that set a tag's sound speed (``sblsim track``'s).
@@ -34,8 +35,8 @@ def _text(value: Any) -> str:
 
 def warnings(study: StudyFolder) -> list[dict[str, str]]:
     """Every warning of the study, each as ``source`` (where it was said) and ``text``: ``study.json``'s notes (the
-    console's ``note:`` lines), the receivers file's notes, the receivers not synchronised, and each tag's warning
-    line as the console printed it."""
+    console's ``note:`` lines), the receivers file's notes, the receivers not synchronised, a refinement of the
+    positions not taken, and each tag's warning line as the console printed it."""
     s = study.summary
     out = [{"source": "study", "text": _text(note)} for note in (s.get("notes") or [])]
     out += [{"source": "receivers file", "text": _text(note)}
@@ -46,6 +47,11 @@ def warnings(study: StudyFolder) -> list[dict[str, str]]:
         scored = []
     out += [{"source": "reference tags", "text": re.sub(r"^(sblsim: warning: |note: )", "", line)}
             for line, warning in scored if warning]
+    try:
+        refined = position_lines(s.get("positions"))
+    except (KeyError, TypeError, ValueError, AttributeError):
+        refined = []
+    out += [{"source": "positions", "text": line.removeprefix("warning: ")} for line, warning in refined if warning]
     missing = summary_value(s, "clocks", "not_synchronised") or []
     if missing:
         out.append({"source": "clocks", "text": f"not synchronised: {', '.join(map(str, missing))} (their detections "
