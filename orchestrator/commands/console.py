@@ -12,6 +12,7 @@ from typing import Callable
 
 from sblsim.fmus.build import DEFAULT_DIR
 from sblsim.models.declarations import ModelError, shown
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.systems import SYSTEMS
 from sblsim.orchestrator.cosim.config import take_notes
 from sblsim.orchestrator.io.arguments import MAX_SEED
@@ -84,8 +85,6 @@ def output_folder(given: Path | None, default: Path, force: bool, marker: str, w
 
 def add_refinement(p: argparse.ArgumentParser, what: str) -> None:
     """``--refine-positions`` (``what`` it refines them with) and ``--survey-sigma`` (its prior)."""
-    from sblsim.models.sync.identifiability import SURVEY_SIGMA
-
     p.add_argument("--refine-positions", action="store_true",
                    help=f"refine the receivers' horizontal positions {what} (a prior of --survey-sigma at the "
                         "table's); writes positions.csv")
