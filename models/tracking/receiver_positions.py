@@ -239,11 +239,11 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     ratio = shape_sigma_ratio(receivers[:, :2], covariance, survey_sigma, arrivals > 0, scale=free)
     determined = ratio < MAX_SIGMA_RATIO
     bias = d[:, 2].copy() if biases else np.zeros(n)
-    bias_sigma = np.sqrt(np.diag(whole)[2:k * n:3]) if biases else np.zeros(n)
+    bias_sigma = np.sqrt(np.maximum(np.diag(whole)[2:k * n:3], 0.0)) if biases else np.zeros(n)
     return Refinement(np.where(determined[:, None], d[:, :2], 0.0), d[:, :2].copy(), covariance, ratio, determined,
                       arrivals, len(rows), iterations, converged, bias, bias_sigma,
                       0 if anchor is None else int(len(anchor.t)), 1.0 / m,
-                      float(np.sqrt(whole[-1, -1])) / m**2 if free else 0.0)
+                      float(np.sqrt(max(whole[-1, -1], 0.0))) / m**2 if free else 0.0)
 
 
 def _weights(e: np.ndarray, sigma: np.ndarray, dof: float, covariance: bool) -> np.ndarray:

@@ -262,11 +262,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     if rounded:
         notes.append(rounded)
 
-    def attempt(deployments, assigned, notes: list[str], workdir: Path, refine: bool = False) -> StudyOutcome:
-        """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``;
-        ``refine``: the synchronisation refines the positions with its sync tags."""
+    def attempt(deployments, assigned, notes: list[str], workdir: Path) -> StudyOutcome:
+        """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``."""
         clocks, table, clocks_info, synced = study_clocks(sync, assigned, deployments, sound_speed, series, bin_hours,
-                                                     notes, refine, survey_sigma)
+                                                          notes)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
         groups = assigned.detections.frame.groupby("tag", sort=False).groups
@@ -357,7 +356,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
 
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
-    outcome = attempt(deployments, assigned, list(notes), workdir, refine_positions)
+    outcome = attempt(deployments, assigned, list(notes), workdir)
     if refine_positions:
         outcome = refined_study(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER),
                                 deployments, assigned, survey_sigma, workdir, TAGS_FOLDER)

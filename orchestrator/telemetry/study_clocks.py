@@ -1,7 +1,7 @@
 """A telemetry study's clocks (:func:`study_clocks`): a synchronisation's folder given (its ``offsets.csv``, its
 refined positions where it has them); else synchronised here from the deployments' sync tags
-(:func:`~sblsim.orchestrator.sync.run.synchronise`, refining the positions with the clocks where asked); else, where no
-deployment has a sync tag or the times are too coarse, taken as logged (said).
+(:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag or the times are too
+coarse, taken as logged (said).
 """
 
 from __future__ import annotations
@@ -10,8 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from sblsim.models.declarations import ModelError
-from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
@@ -22,13 +20,9 @@ TOO_COARSE = "as logged (times too coarse to synchronise)"
 
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
-                 series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
-                 refine: bool = False, survey_sigma: float = SURVEY_SIGMA):
+                 series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
     """A study's clocks (:mod:`sblsim.orchestrator.telemetry.study`, step 2): the clocks, the receivers table they go
-    with, what was done, and the synchronisation made here (or None). With ``refine`` the synchronisation refines the
-    receivers' positions with the clocks where its sync tags determine them
-    (:func:`~sblsim.orchestrator.sync.run.synchronise`; said in a note where they determine none), and the table is
-    theirs.
+    with, what was done, and the synchronisation made here (or None).
 
     Raises
     ------
@@ -47,30 +41,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
     rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
-        def synchronised(refine: bool):
-            return synchronise(assigned.detections, table, sound_speed, series, bin_hours,
-                               receivers_file=deployments.source, alternatives=deployments.alternatives(),
-                               refine_positions=refine, survey_sigma=survey_sigma)
-
         try:
-            try:
-                outcome = synchronised(refine)
-            except RoundingError:
-                raise
-            except ModelError as exc:  # the sync tags determine no position: the clocks on the table's
-                if not refine:
-                    raise
-                notes.append(f"the sync tags refine no receiver's position: {exc}")
-                outcome = synchronised(False)
+            outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours,
+                                  receivers_file=deployments.source, alternatives=deployments.alternatives())
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
-            if outcome.positions is not None:  # the clocks fitted with the positions the sync tags refined
-                moved = outcome.positions[outcome.positions["refined"].astype(bool)]
-                table, _ = with_positions(table, {str(r.serial): (float(r.x_m), float(r.y_m))
-                                                  for r in moved.itertuples()})
             return offsets_clocks(outcome.offsets), table, {
                 "source": "synchronised here", "reference_receiver": s["reference_receiver"],
                 "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],

@@ -1,18 +1,17 @@
-"""A study's receivers' positions refined from its own pings (``sblsim track --refine-positions``): first by the
-synchronisation with its sync tags (the clocks and the positions fitted together where the sync tags determine them:
-:func:`~sblsim.orchestrator.sync.run.synchronise`), then from the moving tags' pings pooled with the sync tags'
-emissions (:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`): the tags' places, each receiver's
-horizontal shift and the constant offset its clock keeps from a synchronisation made on wrong positions, and the
-sound speed where the tags' was calibrated from their pings (it took up the positions' error), the surveyed
+"""A study's receivers' positions refined from its own pings (``sblsim track --refine-positions``): the moving tags'
+pings pooled with the sync tags' emissions (:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`): the
+tags' places, each receiver's horizontal shift and the constant offset its clock keeps from a synchronisation made on
+wrong positions (the sync tags' emissions, both directions of each pair of receivers, tell a clock from a place), and
+the sound speed where the tags' was calibrated from their pings (it took up the positions' error), the surveyed
 positions the prior (``--survey-sigma``).
 
 Taken only where the data say it helps: the moving tags' pings of each block of the record left out in turn fit the
 array refined without them better than the surveyed one (:func:`~sblsim.models.tracking.receiver_positions.held_out`),
-and only for the receivers the pings determine (the rest keep the sync tags' or the survey's). The study is then made
-again on the refined positions (the clocks synchronised on them, every tag tracked again), the positions refined again
-from it until they settle (:data:`ROUNDS`), and kept only where its reference tags and the sync tags left out in turn
-are not worse than on the first positions (:func:`verdict`): both studies' errors are said. The reference tags' pings
-are never in the refinement (they are the check). A translation or a rotation of the whole array changes no time of
+and only for the receivers the pings determine (the rest keep the survey's). The study is then made again on the
+refined positions (the clocks synchronised on them, every tag tracked again), the positions refined again from it
+until they settle (:data:`ROUNDS`), and kept only where its reference tags and the sync tags left out in turn are not
+worse than on the surveyed positions (:func:`verdict`): both studies' errors are said. The reference tags' pings are
+never in the refinement (they are the check). A translation or a rotation of the whole array changes no time of
 arrival, nor its scale where the sound speed is fitted too: those stay the survey's.
 """
 
@@ -59,7 +58,6 @@ class StudyRefinement:
 
     positions: pd.DataFrame
     summary: dict[str, Any]
-    first: pd.DataFrame | None = None  # the positions the survey's study was made on (x, y, source)
 
     @property
     def helps(self) -> bool:
@@ -134,7 +132,6 @@ def sync_pings(residuals: pd.DataFrame | None, hydrophones: pd.DataFrame, names:
 
 def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: list[str], deployments,
                  survey_sigma: float, held: dict[str, Any] | None = None,
-                 start: dict[str, tuple[float, float]] | None = None,
                  anchored: tuple[np.ndarray, np.ndarray] | None = None) -> StudyRefinement:
     """The receivers' positions refined from the moving tags' tracks (the module docstring).
 
@@ -153,9 +150,6 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     held : dict, optional
         An earlier round's held-out check (its ``summary["held_out"]``), taken instead of checking again (a round on
         the clocks synchronised on refined positions: :func:`~sblsim.orchestrator.telemetry.study.run_study`).
-    start : dict, optional
-        Receiver → (x, y) [m]: the positions the study was made on where they are not the survey's (the sync tags'
-        refinement, an earlier round's), kept by a receiver the pings do not refine.
     anchored : (numpy.ndarray, numpy.ndarray), optional
         The sync tags' emissions as :func:`sync_pings` gives them: fitted with the moving tags' pings, each
         receiver's clock offset with its position (both directions of a pair of receivers heard).
@@ -193,17 +187,14 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
                 "rule": f"the refined array's median chi2 per degree of freedom of the pings left out at most "
                         f"{1 - HELD_OUT_GAIN:g} of the survey's, and lower in most blocks"}
     cov = fit.covariance
-    sx, sy = np.sqrt(np.diag(cov)[0::2]), np.sqrt(np.diag(cov)[1::2])
+    sx, sy = np.sqrt(np.maximum(np.diag(cov)[0::2], 0.0)), np.sqrt(np.maximum(np.diag(cov)[1::2], 0.0))
     refined = fit.determined & held["helps"]
     reason = np.where(fit.arrivals == 0, "not heard by a moving tag with three others at once",
                       np.where(~fit.determined, [f"its posterior sigma {r:.2f} of the survey's in the array's shape "
                                                  "(needs < 0.5)" for r in fit.sigma_ratio],
                                np.where(refined, "", "the held-out pings fit the refined array no better")))
-    start = start or {}
-    before = np.array([start.get(n, (x, y)) for n, x, y in zip(names, receivers[:, 0], receivers[:, 1],
-                                                                strict=True)], float).reshape(-1, 2)
-    at = np.where(refined[:, None], receivers[:, :2] + fit.shift, before)
-    source = np.where(refined, "moving tags' pings", np.where(np.isin(names, list(start)), "sync tags", "survey"))
+    at = receivers[:, :2] + np.where(refined[:, None], fit.shift, 0.0)
+    source = np.where(refined, "moving tags' pings", "survey")
     positions = pd.DataFrame({
         "receiver": names, "x": at[:, 0], "y": at[:, 1], "survey_x": receivers[:, 0], "survey_y": receivers[:, 1],
         "shift_x": at[:, 0] - receivers[:, 0], "shift_y": at[:, 1] - receivers[:, 1],
@@ -212,7 +203,7 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
         "sigma_ratio": fit.sigma_ratio, "arrivals": fit.arrivals.astype(int),
         "fitted_shift_m": np.hypot(fit.fitted[:, 0], fit.fitted[:, 1]), "refined": refined, "reason": reason})
     moved = positions[positions["refined"]]
-    summary = {"by_sync_tags": int((source == "sync tags").sum()), "sync_emissions": fit.anchored,
+    summary = {"sync_emissions": fit.anchored,
                "clock_offsets_fitted": biases,
                "sound_speed": ({"fitted": True, "scale": fit.speed_scale, "scale_sigma": fit.speed_scale_sigma,
                                 "why": "the tags' sound speeds were calibrated from their pings on the surveyed "
@@ -227,9 +218,7 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
         "converged": fit.converged, "iterations": fit.iterations,
         "held_out": held,
         "gauge": "a translation or a rotation of the whole array changes no time of arrival: the survey's kept"}
-    first = pd.DataFrame({"x": before[:, 0], "y": before[:, 1],
-                          "source": np.where(np.isin(names, list(start)), "sync tags", "survey")})
-    return StudyRefinement(positions, summary, first)
+    return StudyRefinement(positions, summary)
 
 
 def _errors(references: dict[str, Any] | None) -> dict[str, float | None]:
@@ -252,11 +241,10 @@ def verdict(refinement: StudyRefinement, surveyed: dict[str, Any] | None, refine
         p = refinement.positions
         why = f"the {' and '.join(worse)} errors are worse on the refined positions"
         p.loc[p["refined"], "reason"] = why
-        p[["x", "y"]] = refinement.first[["x", "y"]].to_numpy()
-        p[["shift_x", "shift_y"]] = p[["x", "y"]].to_numpy() - p[["survey_x", "survey_y"]].to_numpy()
-        p["shift_m"] = np.hypot(p["shift_x"], p["shift_y"])
+        p[["x", "y"]] = p[["survey_x", "survey_y"]].to_numpy()
+        p[["shift_x", "shift_y", "shift_m"]] = 0.0
         p[["sigma_x", "sigma_y"]] = np.nan
-        p["source"] = refinement.first["source"].to_numpy()
+        p["source"] = "survey"
         p["refined"] = False
     return not worse
 
@@ -278,9 +266,6 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
     where the held-out pings say it helps, in rounds, and kept where its reference and left-out sync tags are not
     worse (the module docstring); its tags' folders (``tags_folder``) moved over the first study's where kept. The
     study returned says what was done (``summary["positions"]``; ``positions``: ``positions.csv``)."""
-    synced = outcome.sync.positions if outcome.sync is not None and outcome.sync.positions is not None else None
-    start = {} if synced is None else {str(r.serial): (float(r.x_m), float(r.y_m))
-                                        for r in synced[synced["refined"].astype(bool)].itertuples()}
     names = [str(n) for n in deployments.table["receiver"]]
 
     def anchored(study):
@@ -288,7 +273,7 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
 
     try:
         refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
-                                  start=start, anchored=anchored(outcome))
+                                  anchored=anchored(outcome))
     except ModelError as exc:
         outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
         outcome.summary["notes"].append(f"positions not refined: {exc}")
@@ -309,7 +294,7 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
             break
         try:
             following = refine_study(second.outcomes, second.matrices, _moving(second), deployments, survey_sigma,
-                                     refinement.summary["held_out"], start, anchored(second))
+                                     refinement.summary["held_out"], anchored(second))
         except ModelError:
             break
         change = float(np.hypot(*(following.positions[["x", "y"]].to_numpy()
@@ -317,7 +302,6 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
         rounds[-1]["change_after_m"] = change
         if change < ROUND_TOLERANCE:
             break
-        following.first = refinement.first
         refinement = following
     refinement.summary["rounds"] = rounds
     kept = verdict(refinement, outcome.summary["reference_tags"], second.summary["reference_tags"])

@@ -23,6 +23,10 @@ def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None
     bar: list[Any] = []
 
     def started(folders: list[str], summary: dict[str, Any]) -> None:
+        if bar:  # the study made again (its positions refined): a bar of its own, the opening lines said once
+            bar.pop().close()
+            bar.append(progress_of(progress, len(folders), "tracking again", "tag")[0])
+            return
         if lines:
             for line in opening_lines(detections, summary, len(folders), options):
                 print(line, flush=True)
