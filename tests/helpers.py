@@ -87,6 +87,24 @@ def _default_signals() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
+def gauge_free(errors: np.ndarray, at: np.ndarray, scale: bool = False) -> np.ndarray:
+    """An array's position errors (R, 2) [m] less their best translation and rotation about ``at``'s centroid (and
+    dilation, with ``scale``), by least squares: what no time of arrival sees (the array's shape is what is left)."""
+    centred = at - at.mean(axis=0)
+    H = np.zeros((2 * len(at), 4 if scale else 3))
+    H[0::2, 0] = H[1::2, 1] = 1.0
+    H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
+    if scale:
+        H[0::2, 3], H[1::2, 3] = centred[:, 0], centred[:, 1]
+    v = np.ravel(errors)
+    return (v - H @ np.linalg.lstsq(H, v, rcond=None)[0]).reshape(-1, 2)
+
+
+def shape_rms(errors: np.ndarray, at: np.ndarray, scale: bool = False) -> float:
+    """The RMS [m] of :func:`gauge_free` errors."""
+    return float(np.sqrt(np.mean(np.sum(gauge_free(errors, at, scale) ** 2, axis=1))))
+
+
 def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen:
     """``subprocess.Popen(command, **kwargs)`` with SIGINT and SIGTERM at their defaults in the child.
 

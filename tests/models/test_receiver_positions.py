@@ -12,6 +12,7 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.receiver_positions import held_out, refine_receivers
+from tests.helpers import gauge_free, shape_rms
 
 C, SIGMA, SURVEY = 1480.0, 2e-4, 3.0
 
@@ -25,17 +26,7 @@ def _shape_errors(rng: np.random.Generator, at: np.ndarray, low: float = 1.0, hi
     rotation of the whole array (what no time of arrival sees: the survey's datum)."""
     direction = rng.normal(size=at.shape)
     errors = rng.uniform(low, high, len(at))[:, None] * direction / np.linalg.norm(direction, axis=1, keepdims=True)
-    return _without_gauge(errors, at)
-
-
-def _without_gauge(errors: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """``errors`` less their best translation and rotation about ``at``'s centroid (a least-squares fit)."""
-    centred = at - at.mean(axis=0)
-    H = np.zeros((2 * len(at), 3))
-    H[0::2, 0] = H[1::2, 1] = 1.0
-    H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
-    v = errors.ravel()
-    return (v - H @ np.linalg.lstsq(H, v, rcond=None)[0]).reshape(-1, 2)
+    return gauge_free(errors, at)
 
 
 def _towed(rng: np.random.Generator, receivers: np.ndarray, pings: int = 1200, late: float = 0.02):
@@ -74,7 +65,7 @@ def test_an_array_whose_shape_is_off_comes_back(seed):
     refined = refine_receivers(toa, table, starts, C, SIGMA, SURVEY)
     assert refined.converged and refined.determined.all(), refined
     moved = table + refined.shift
-    shape = np.sqrt(np.mean(np.sum(_without_gauge(moved - true, true) ** 2, axis=1)))
+    shape = shape_rms(moved - true, true)
     assert shape < 0.1, shape
     at_true, at_table, at_refined = (_fix_error(toa, a, path) for a in (true, table, moved))
     assert at_refined <= 1.1 * at_true and at_table > 2 * at_true, (at_true, at_table, at_refined)
@@ -193,7 +184,7 @@ def test_clock_offsets_are_told_from_positions_by_the_sync_tags():
     starts = fix_pings(toa, table, C, SIGMA)[0]
 
     def shape(fit):
-        return np.sqrt(np.mean(np.sum(_without_gauge(table + fit.fitted - true, true) ** 2, axis=1)))
+        return shape_rms(table + fit.fitted - true, true)
 
     alone = refine_receivers(toa, table, starts, C, SIGMA, SURVEY)
     joint = refine_receivers(toa, table, starts, C, SIGMA, SURVEY, biases=True, anchored=anchored)
@@ -219,15 +210,7 @@ def test_a_sound_speed_calibrated_on_a_wrong_array_is_fitted_with_it():
     free = refine_receivers(toa, table, starts, wrong, SIGMA, SURVEY, speed_sigma=0.01)
 
     def shape(fit, scale: bool):
-        errors = table + fit.fitted - true
-        centred = true - true.mean(axis=0)
-        H = np.zeros((2 * len(true), 4 if scale else 3))
-        H[0::2, 0] = H[1::2, 1] = 1.0
-        H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
-        if scale:
-            H[0::2, 3], H[1::2, 3] = centred[:, 0], centred[:, 1]
-        v = errors.ravel()
-        return np.sqrt(np.mean(np.sum((v - H @ np.linalg.lstsq(H, v, rcond=None)[0]).reshape(-1, 2) ** 2, axis=1)))
+        return shape_rms(table + fit.fitted - true, true, scale)
 
     # held, the wrong speed is a wrong scale the shifts take up against the survey; free, the survey's scale stays
     assert shape(free, True) < 0.1 and shape(held, False) > shape(free, False) + 0.3, (

@@ -14,7 +14,7 @@ import sblsim
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.telemetry.study_positions import StudyRefinement, lines, sync_pings, verdict
-from tests.helpers import check_tag_rows
+from tests.helpers import check_tag_rows, gauge_free, shape_rms
 
 
 def test_the_sync_tags_emissions_are_their_arrivals_from_their_receiver():
@@ -95,18 +95,6 @@ def test_the_survey_sigma_is_refused_in_one_line(tmp_path, capsys, extra, messag
 # --------------------------------------------------------------------------- a simulated study, positions off
 
 
-def _gauge_free(errors: np.ndarray, at: np.ndarray, scale: bool) -> np.ndarray:
-    """``errors`` (R, 2) [m] less their best translation, rotation (and dilation) about ``at``'s centroid."""
-    centred = at - at.mean(axis=0)
-    H = np.zeros((2 * len(at), 4 if scale else 3))
-    H[0::2, 0] = H[1::2, 1] = 1.0
-    H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
-    if scale:
-        H[0::2, 3], H[1::2, 3] = centred[:, 0], centred[:, 1]
-    v = errors.ravel()
-    return (v - H @ np.linalg.lstsq(H, v, rcond=None)[0]).reshape(-1, 2)
-
-
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     """A simulated study (9 receivers each with its sync tag, 3 animals, 6 hours), its deployments as surveyed right
@@ -122,7 +110,7 @@ def simulated(tmp_path_factory):
     direction = rng.normal(size=true.shape)
     errors = rng.uniform(1.0, 5.0, len(true))[:, None] * direction / np.linalg.norm(direction, axis=1,
                                                                                       keepdims=True)
-    errors = _gauge_free(errors, true, scale=True)
+    errors = gauge_free(errors, true, scale=True)
     lat, lon = sim.frame.to_latlon(true[:, 0] + errors[:, 0], true[:, 1] + errors[:, 1])
     (folder / "off").mkdir()
     sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(folder / "off" / "deployments.csv", index=False)
@@ -166,7 +154,7 @@ def test_the_tracks_come_back_to_the_true_positions_accuracy(simulated):
     positions = pd.read_csv(folder / "off_refined" / "positions.csv", dtype={"receiver": str})
     order = [str(s) for s in pd.read_csv(folder / "in" / "deployments.csv")["ins_serial_no"]]
     at = positions.set_index("receiver").loc[order, ["x", "y"]].to_numpy()
-    shape = np.sqrt(np.mean(np.sum(_gauge_free(at - true, true, scale=True) ** 2, axis=1)))
+    shape = shape_rms(at - true, true, scale=True)
     assert shape < 0.2 and positions["refined"].all(), (shape, positions)
     checks = summary["checks"]["sync_left_out"]
     assert checks["refined_m"] <= 1.05 * checks["survey_m"], checks
