@@ -239,7 +239,7 @@ def verdict(refinement: StudyRefinement, surveyed: dict[str, Any] | None, refine
     refinement.summary["worse"] = worse
     if worse:  # the survey's positions stand: positions.csv says so, with what the pings would have moved
         p = refinement.positions
-        why = f"the {' and '.join(worse)} errors are worse on the refined positions"
+        why = f"the {' and '.join(worse)} errors are worse on the refined positions (study.json's positions.checks)"
         p.loc[p["refined"], "reason"] = why
         p[["x", "y"]] = p[["survey_x", "survey_y"]].to_numpy()
         p[["shift_x", "shift_y", "shift_m"]] = 0.0
@@ -274,9 +274,8 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
     try:
         refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
                                   anchored=anchored(outcome))
-    except ModelError as exc:
+    except ModelError as exc:  # said in a warning (lines)
         outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
-        outcome.summary["notes"].append(f"positions not refined: {exc}")
         return outcome
     if not refinement.helps:
         refinement.summary["kept"] = False
@@ -305,13 +304,12 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
         refinement = following
     refinement.summary["rounds"] = rounds
     kept = verdict(refinement, outcome.summary["reference_tags"], second.summary["reference_tags"])
-    chosen, other = (second, outcome) if kept else (outcome, second)
+    chosen = second if kept else outcome
     if kept:  # the refined study's tags' folders in the study's place
         shutil.rmtree(workdir / tags_folder, ignore_errors=True)
         if (workdir / REFINED_FOLDER / tags_folder).exists():
             (workdir / REFINED_FOLDER / tags_folder).rename(workdir / tags_folder)
     shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
-    del other
     chosen.deployments = deployments  # receivers.csv: the deployments as read (positions.csv the refined)
     chosen.summary["positions"], chosen.positions = refinement.summary, refinement.positions
     return chosen
@@ -337,8 +335,9 @@ def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
             out.append((f"  {label} median error: {got['survey_m']:.2f} m before the refinement, "
                         f"{got['refined_m']:.2f} m after", False))
     if not summary.get("kept", False):
+        named = {"reference": "reference tags'", "sync_left_out": "left-out sync tags'"}
         why = ("the held-out pings fit the refined array no better" if not held["helps"] or not summary["refined"]
-               else f"the {' and '.join(summary.get('worse') or [])} errors are worse on it")
+               else f"the {' and '.join(named[k] for k in summary.get('worse') or [])} errors are worse on it")
         out.append((f"warning: positions not refined: {why}; the survey's positions kept (positions.csv says "
                     "what the pings would move)", True))
     return out

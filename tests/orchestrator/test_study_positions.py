@@ -73,7 +73,7 @@ def test_the_console_says_what_was_refined_and_what_was_kept():
     verdict(worse, {"reference": {"median_error_m": 1.0}}, {"reference": {"median_error_m": 2.0}})
     said = lines(worse.summary)
     assert said[0][0].startswith("positions: 2 of 2 receivers the pings would move")
-    assert said[-1][1] and "the reference errors are worse on it" in said[-1][0]
+    assert said[-1][1] and "the reference tags' errors are worse on it" in said[-1][0]
     assert lines({"kept": False, "reason": "no moving tag"}) == [("warning: positions not refined: no moving tag",
                                                                    True)]
 
