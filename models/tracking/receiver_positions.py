@@ -9,9 +9,17 @@ fix's in 3-D); each arrival weighed by its Student-t weight ``(ν + 1) / (ν + z
 little; iteratively reweighted). The pings are eliminated ping by ping (three unknowns each, Schur's complement),
 leaving the shifts' normal matrix, ``2R × 2R``: a record's cost is linear in its pings.
 
+Where asked, three more kinds of unknowns join them: each receiver's **range bias** ``β_i`` [m] (``toa_ij = t_j +
+(‖p_j − (r_i + d_i)‖ + β_i) / c_j``, the same prior: a constant offset of its clock, as a synchronisation made on
+wrong positions leaves it); **anchored pings**, emitted where a receiver is (a sync tag at its receiver: its place
+moves with that receiver, its emission time its only unknown of its own), which tell a receiver's clock from its place
+(both directions of each pair of receivers are heard); and the **sound speed's scale** ``m`` (``c_j / m``, a prior on
+``m``), where the sound speed was calibrated from the same pings on the surveyed positions and took up their error.
+
 A ping heard by three receivers (two coordinates and a time) adds nothing: only pings with at least four arrivals
 are fitted. What the pings determine is the array's **shape**: a translation or a rotation of the whole array with
-its track changes no time of arrival, so those stay the survey's (the prior's mean) with its σ₀/√R; a receiver is
+its track changes no time of arrival (nor, with the sound speed fitted, a dilation: a larger array at a faster sound
+speed), so those stay the survey's (the prior's mean) with its σ₀/√R; a receiver is
 **determined** where its posterior σ in the shape is below :data:`~sblsim.models.sync.identifiability.
 MAX_SIGMA_RATIO` of the survey's (:func:`~sblsim.models.sync.identifiability.shape_sigma_ratio`), and keeps its
 surveyed position elsewhere.
