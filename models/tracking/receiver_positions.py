@@ -25,10 +25,7 @@ MAX_SIGMA_RATIO` of the survey's (:func:`~sblsim.models.sync.identifiability.sha
 surveyed position elsewhere.
 
 Whether a refinement helps is the data's to say, not the fit's own residuals (a refined array always fits the pings
-it was fitted to better): :func:`held_out` fits it on all but one block of the record's pings in turn and fixes the
-pings of the block left out with the surveyed and with that refined array, each ping alone
-(:func:`~sblsim.models.tracking.fix.fix_pings`): the refinement helps where the pings it never saw agree better with
-it.
+it was fitted to better): :mod:`sblsim.models.tracking.held_out` leaves each block of the pings out in turn.
 
 References
 ----------
@@ -58,15 +55,9 @@ MIN_ARRIVALS = 4
 ITERATIONS, STEP_TOLERANCE = 50, 1e-3
 #: Pings per chunk of the elimination (a chunk's (pings, R, R) products stay small).
 CHUNK = 4096
-#: The blocks of the record :func:`held_out` leaves out in turn.
-FOLDS = 4
 #: A ping whose fix at the surveyed positions fits this many times worse than the median ping's (χ² per degree of
 #: freedom) is left out of the refinement: a fix in a mirror place or of echoes, no start for Gauss-Newton.
 START_GATE = 25.0
-#: The least share by which the held-out pings' median χ² per degree of freedom must fall for a refinement to
-#: help: a right array's refinement moves it by its noise, and the pings it never saw fit it within a few per cent
-#: (the chance of that noise, or of the echoes' weights), never by a twentieth.
-HELD_OUT_GAIN = 0.05
 #: The σ [m] a place's depth is kept at in a 3-D fix (the depth is the tag's, not refitted).
 DEPTH_SIGMA = 0.01
 #: The most one Gauss-Newton step moves a receiver [survey σ]: a step the arrivals' weights are not yet right for
@@ -120,7 +111,15 @@ class Refinement:
     speed_scale_sigma: float = 0.0
 
 
-def _checked(toa, receivers, places, c, sigma_toa, survey_sigma):
+def checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma):
+    """:func:`refine_receivers`' arguments checked and as arrays: ``toa`` (P, R), ``receivers`` (R, dim),
+    ``places`` (P, dim), ``c`` (P,), ``sigma`` (R,).
+
+    Raises
+    ------
+    ModelError
+        Shapes that do not agree; a sound speed, timing noise or survey σ not positive (one line).
+    """
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     if toa.ndim != 2 or receivers.ndim != 2 or toa.shape[1] != len(receivers) or receivers.shape[1] not in (2, 3):
@@ -192,11 +191,11 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         Shapes that do not agree; a sound speed or survey σ not positive; no ping heard by
         :data:`MIN_ARRIVALS` receivers.
     """
-    toa, receivers, places, c, sigma = _checked(toa, receivers, places, c, sigma_toa, survey_sigma)
+    toa, receivers, places, c, sigma = checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma)
     dim = receivers.shape[1]
     heard = np.isfinite(toa)
     rows = np.flatnonzero((heard.sum(axis=1) >= MIN_ARRIVALS) & (np.isfinite(places[:, 2]) if dim == 3 else True))
-    fixed, emitted, ratio = _best_fixes(toa[rows], receivers, places[rows], c[rows], sigma)
+    fixed, emitted, ratio = best_fixes(toa[rows], receivers, places[rows], c[rows], sigma)
     fits = np.isfinite(ratio)
     if fits.any():
         fits &= ratio <= START_GATE * max(float(np.median(ratio[fits])), 1.0)
@@ -402,83 +401,28 @@ def _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof, covariance
     return full, vector, ping_steps
 
 
-@dataclass(frozen=True)
-class HeldOut:
-    """The pings of each block of the record fixed with the surveyed array and with the array refined without them
-    (:func:`held_out`).
+def best_fixes(toa, receivers, places, c, sigma):
+    """Each ping fixed alone with every arrival (:func:`~sblsim.models.tracking.fix.fix_pings`, no gate), from its
+    place and from the fix's own start, the better kept (its depth the place's in 3-D).
 
-    Attributes
+    Parameters
     ----------
-    surveyed, refined : float
-        [1] the median over the held-out pings of a fix's squared normalised residuals per degree of freedom
-        (χ² / (arrivals − unknowns)), with the surveyed and with the refined positions.
-    pings : int
-        The held-out pings with a degree of freedom (fixed with either array).
-    folds : numpy.ndarray
-        (k, 2) [1] each block's two medians.
-    """
-
-    surveyed: float
-    refined: float
-    pings: int
-    folds: np.ndarray
-
-    @property
-    def helps(self) -> bool:
-        """The refined array fits the pings it never saw better, by :data:`HELD_OUT_GAIN` in the whole record and
-        in most of its blocks."""
-        better = self.folds[:, 1] < self.folds[:, 0]
-        return bool(self.refined <= (1.0 - HELD_OUT_GAIN) * self.surveyed and better.sum() * 2 > len(better))
-
-
-def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: float | np.ndarray,
-             sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS, dof: float = ROBUST_DOF,
-             biases: bool = False, anchored: tuple[np.ndarray, np.ndarray] | None = None,
-             speed_sigma: float | None = None) -> HeldOut:
-    """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
-    the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
-    anchored pings in every refinement, the refined array's times less its biases); the
-    blocks' pings fixed with every arrival (no gate: a receiver's error is what is measured), each from its place or
-    the fix's own start (the better), their depth kept at the places' in 3-D.
+    toa : numpy.ndarray
+        (k, R) [s] times of arrival, NaN where not heard.
+    receivers : numpy.ndarray
+        (R, dim) [m].
+    places : numpy.ndarray
+        (k, dim) [m] each ping's place to start from, NaN where none.
+    c : numpy.ndarray
+        (k,) [m/s] each ping's sound speed (pings of one speed fixed together).
+    sigma : numpy.ndarray
+        (R,) [s] each receiver's timing noise.
 
     Returns
     -------
-    HeldOut
-
-    Raises
-    ------
-    ModelError
-        As :func:`refine_receivers`, for a block left out.
+    places, emissions, ratio : numpy.ndarray
+        (k, dim) [m], (k,) [s] and χ² per degree of freedom (k,) [1]; NaN where a ping has none.
     """
-    toa, receivers, places, c, sigma = _checked(toa, receivers, places, c, sigma_toa, survey_sigma)
-    usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= MIN_ARRIVALS)
-    per_fold, pooled = [], [[], []]
-    for block in np.array_split(usable, folds):
-        keep = np.ones(len(toa), bool)
-        keep[block] = False
-        refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
-                                   anchored, speed_sigma)
-        moved = receivers.copy()
-        moved[:, :2] += refined.shift
-        # the refined array's times less its receivers' range biases (where determined, as its shifts), at its speed
-        speed = c[block] * refined.speed_scale
-        corrected = toa[block] - np.where(refined.determined, refined.bias, 0.0)[None] / speed[:, None]
-        medians = []
-        for k, (array, times, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
-            ratio = _best_fixes(times, array, places[block], at, sigma)[2]
-            pooled[k].append(ratio)
-            medians.append(np.nanmedian(ratio) if np.isfinite(ratio).any() else np.nan)
-        per_fold.append(medians)
-    surveyed, refined = (np.concatenate(p) for p in pooled)
-    both = np.isfinite(surveyed) & np.isfinite(refined)
-    return HeldOut(float(np.median(surveyed[both])) if both.any() else np.nan,
-                   float(np.median(refined[both])) if both.any() else np.nan, int(both.sum()), np.array(per_fold))
-
-
-def _best_fixes(toa, receivers, places, c, sigma):
-    """Each ping fixed alone with every arrival, from its place and from the fix's own start, the better kept (its
-    depth the place's in 3-D): places (k, dim) [m], emission times (k,) [s] and χ² per degree of freedom (k,) [1],
-    NaN where none. Pings of one sound speed are fixed together."""
     dim = receivers.shape[1]
     out = np.full((len(toa), dim), np.nan), np.full(len(toa), np.nan), np.full(len(toa), np.nan)
     for speed in np.unique(c):
@@ -497,5 +441,5 @@ def _best_fixes(toa, receivers, places, c, sigma):
     return out
 
 
-__all__ = ["CHUNK", "DEPTH_SIGMA", "FOLDS", "HELD_OUT_GAIN", "HeldOut", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS",
-           "Refinement", "START_GATE", "STEP_TOLERANCE", "held_out", "refine_receivers"]
+__all__ = ["CHUNK", "DEPTH_SIGMA", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS", "Refinement", "START_GATE",
+           "STEP_TOLERANCE", "best_fixes", "checked_inputs", "refine_receivers"]

@@ -6,7 +6,7 @@ the sound speed where the tags' was calibrated from their pings (it took up the 
 positions the prior (``--survey-sigma``).
 
 Taken only where the data say it helps: the moving tags' pings of each block of the record left out in turn fit the
-array refined without them better than the surveyed one (:func:`~sblsim.models.tracking.receiver_positions.held_out`),
+array refined without them better than the surveyed one (:func:`~sblsim.models.tracking.held_out.held_out`),
 and only for the receivers the pings determine (the rest keep the survey's). The study is then made again on the
 refined positions (the clocks synchronised on them, every tag tracked again), the positions refined again from it
 until they settle (:data:`ROUNDS`), and kept only where its reference tags and the sync tags left out in turn are not
@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.tracking.receiver_positions import HELD_OUT_GAIN, held_out, refine_receivers
+from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
+from sblsim.models.tracking.receiver_positions import refine_receivers
 
 #: The rounds at most of a refinement (each: the study made again on the positions, its clocks synchronised on
 #: them, and the positions refined again from its tracks), and the largest change of a receiver's refined position

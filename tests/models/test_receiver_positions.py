@@ -11,7 +11,8 @@ import pytest
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.fix import fix_pings
-from sblsim.models.tracking.receiver_positions import held_out, refine_receivers
+from sblsim.models.tracking.held_out import held_out
+from sblsim.models.tracking.receiver_positions import refine_receivers
 from tests.helpers import gauge_free, shape_rms
 
 C, SIGMA, SURVEY = 1480.0, 2e-4, 3.0
