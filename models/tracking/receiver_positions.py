@@ -45,7 +45,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, shape_sigma_ratio
 from sblsim.models.tracking.fix import fix_pings
-from sblsim.models.tracking.smoother_cost import ROBUST_DOF
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
 from sblsim.models.tracking.toa import checked_sigma
 
 #: Arrivals a ping needs to be fitted (two coordinates and an emission time, and one more to say anything).
@@ -258,7 +258,7 @@ def _weights(e: np.ndarray, sigma: np.ndarray, dof: float, covariance: bool) -> 
     ``covariance`` (0 past √ν σ: the robust smoother's covariance)."""
     zed = e / sigma
     if covariance:
-        return np.maximum((dof + 1.0) * (dof - zed**2) / (dof + zed**2) ** 2, 0.0) / sigma**2
+        return observed_information(zed, dof) / sigma**2
     return (dof + 1.0) / (dof + zed**2) / sigma**2
 
 
@@ -269,6 +269,7 @@ class _Anchored:
 
     def __init__(self, toa: np.ndarray, source: np.ndarray, c: float, t: np.ndarray):
         self.toa, self.source, self.c, self.t = toa, source, c, t
+        self.emission, self.receiver = np.nonzero(np.isfinite(toa))  # each arrival's emission and receiver
         self._steps = None
 
     @classmethod
@@ -291,8 +292,7 @@ class _Anchored:
         """Their reduced normal matrix and right-hand side in the receivers' unknowns (and the slowness's scale,
         last, where ``free``), each emission time eliminated; the emission times' steps kept for :meth:`advance`."""
         n, k = d.shape
-        heard = np.isfinite(self.toa)
-        q, i = np.nonzero(heard)
+        q, i = self.emission, self.receiver
         src = self.source[q]
         where = np.array(receivers, float)
         where[:, :2] += d[:, :2]

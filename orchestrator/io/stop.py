@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import multiprocessing
 import signal
-import sys
 import threading
 from contextlib import contextmanager
 from typing import Iterator
@@ -91,12 +90,10 @@ def workers_ignore_ctrl_c() -> None:
     terminated, a cluster closed) and a worker that took it itself would print its own traceback. Nothing in the
     command's own process.
 
-    A spawned worker is known while it imports by its process's name, which the spawn's preparation sets first
-    (``SpawnProcess-1``; ``MainProcess`` in the command): the same preparation replaces ``sys.argv`` with the
-    command's before the import, and its parent process is only set after it."""
-    spawned = "--multiprocessing-fork" in sys.argv  # its command line before the preparation
-    worker = (spawned or multiprocessing.current_process().name != "MainProcess"
-              or multiprocessing.parent_process() is not None)
+    A worker is known by its process's name (``MainProcess`` only in the command): a spawned worker's preparation
+    sets it first, before it imports this module, where its ``sys.argv`` is already the command's and its parent
+    process not yet set."""
+    worker = multiprocessing.current_process().name != "MainProcess"
     if worker and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
