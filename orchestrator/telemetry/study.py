@@ -66,6 +66,7 @@ from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refine
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
+from sblsim.orchestrator.tracks.resume import Resume
 from sblsim.orchestrator.tracks.tracker import toa_noise
 
 #: The columns of ``tags.csv``: a tag's ``pings`` are always ``positioned`` + ``set_aside`` + ``not_positioned``
@@ -166,7 +167,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
               water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
               tz: str | None = None, refine_positions: bool = False,
-              survey_sigma: float = SURVEY_SIGMA) -> StudyOutcome:
+              survey_sigma: float = SURVEY_SIGMA, resume: Resume | None = None) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -222,6 +223,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         where that helps (:mod:`.study_positions`: ``summary["positions"]``, the outcome's ``positions``).
     survey_sigma : float
         [m] the receivers' surveyed positions' σ per horizontal axis (the refinement's prior).
+    resume : Resume, optional
+        The tags kept by an interrupted run of the same output (:mod:`~sblsim.orchestrator.tracks.resume`): a tag
+        whose inputs are unchanged is taken from it, each tag that ends is kept (``summary["resumed"]``).
 
     Returns
     -------
@@ -339,7 +343,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             if ended is not None:
                 ended(rows[name])
 
-        results = run_tracks(jobs, workers, scheduler, done) if jobs else {}
+        kept = 0 if resume is None else resume.kept
+        results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
+        if resume is not None and resume.kept > kept:
+            summary["resumed"] = {"tags_kept": resume.kept - kept}
         # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
         outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
         table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))

@@ -158,11 +158,14 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
 
 def study_lines(outcome: Any) -> list[tuple[str, bool]]:
     """The console's lines of a study once it has run, each with whether it is for standard error: its tags'
-    (:func:`tag_lines`), its reference tags' (:func:`reference_lines`) and its refined positions'
+    (:func:`tag_lines`, after the tags kept from an interrupted run), its reference tags' (:func:`reference_lines`) and its refined positions'
     (:func:`~sblsim.orchestrator.telemetry.study_positions.lines`)."""
     from sblsim.orchestrator.telemetry.study_positions import lines  # numpy and pandas: loaded with the study
 
-    return (tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
+    resumed = outcome.summary.get("resumed")
+    kept = [(f"resumed: {resumed['tags_kept']} tags kept from an interrupted run of this output (their inputs "
+             "unchanged), the others tracked", False)] if resumed else []
+    return (kept + tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
             + lines(outcome.summary.get("positions")))
 
 

@@ -1,5 +1,6 @@
 """A telemetry study run for ``sblsim track`` and :func:`sblsim.track`: into its folder, all or nothing (staged; a
-temporary folder where none is asked for), its progress reported (a bar as the tags end, and on the console the
+temporary folder where none is asked for; the tags finished by an interrupted run of that folder kept:
+:mod:`~sblsim.orchestrator.tracks.resume`), its progress reported (a bar as the tags end, and on the console the
 study's opening lines: :mod:`.study_report`).
 """
 
@@ -12,6 +13,7 @@ from typing import Any
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, progress_of
 from sblsim.orchestrator.telemetry.study_report import opening_lines
+from sblsim.orchestrator.tracks.resume import Resume
 
 
 def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
@@ -41,12 +43,14 @@ def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None
             with tempfile.TemporaryDirectory(prefix="sblsim-study-") as tmp:
                 return run_study(detections, receivers, tags, workdir=Path(tmp), sync=sync, started=started,
                                  ended=ended, **options)
+        resume = Resume(target)  # the tags of an interrupted run of this output, each tag kept as it ends
         with staged_directory(target) as tmp:
             outcome = run_study(detections, receivers, tags, workdir=tmp, sync=sync, started=started, ended=ended,
-                                **options)
+                                resume=resume, **options)
             if bar:
                 bar[0].close()
             write_study(outcome, tmp)
+        resume.remove()
         return outcome
     finally:
         if bar:

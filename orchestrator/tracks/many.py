@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
@@ -25,8 +26,10 @@ from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out, real_argument
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.tracks.options import TOA_OPTIONS, toa_options
+from sblsim.orchestrator.tracks.outcome import TrackOutcome
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.replay import TrackResult
+from sblsim.orchestrator.tracks.resume import Resume, job_key
 from sblsim.orchestrator.tracks.track import track
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -101,19 +104,78 @@ def _row(name: str, result, elapsed: float) -> dict[str, Any]:
             "ping_type": s["ping_type"]["type"], "segments": len(s["segments"]), "wall_time_s": s["wall_time_s"]}
 
 
+def _relocated(value: Any, moves: dict[str, str]) -> Any:
+    """``value`` (a refusal's line, or an outcome's summary within) with each folder of ``moves`` named as its
+    value (a worker's copies of the files named as the files it was sent)."""
+    if isinstance(value, str):
+        for there, here in moves.items():
+            value = value.replace(there, here)
+        return value
+    if isinstance(value, dict):
+        return {k: _relocated(v, moves) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_relocated(v, moves) for v in value]
+    if isinstance(value, TrackOutcome):
+        return replace(value, summary=_relocated(value.summary, moves))
+    return value
+
+
+def sent_files(toa: Path, receivers: Path, options: dict[str, Any]) -> dict[str, tuple[str, bytes]]:
+    """The files one tag's track reads, as sent to a worker that shares no filesystem with this process: role (``toa``,
+    ``receivers`` or the option's name) → (the file's path here, its bytes)."""
+    files = {"toa": toa, "receivers": receivers} | {k: v for k, v in options.items() if isinstance(v, Path)}
+    return {role: (str(path), Path(path).read_bytes()) for role, path in files.items()}
+
+
+def track_sent(files: dict[str, tuple[str, bytes]], options: dict[str, Any]):
+    """:func:`track_tag` on a worker of its own files (:func:`sent_files`): each written in a temporary folder of the
+    worker, tracked, and named in the outcome as it is named here, so that the outcome is the one this process would
+    make."""
+    with tempfile.TemporaryDirectory(prefix="sblsim-tag-") as tmp:
+        paths, moves = {}, {}
+        for role, (name, data) in files.items():
+            folder = Path(tmp) / role
+            folder.mkdir()
+            paths[role] = folder / Path(name).name
+            paths[role].write_bytes(data)
+            moves[str(folder)] = str(Path(name).parent)
+        mine = {k: paths.get(k, v) for k, v in options.items()}
+        return _relocated(track_tag(paths["toa"], paths["receivers"], mine), moves)
+
+
 def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: int | None = None,
-               scheduler: str | None = None, ended: Callable[[str, Any], None] | None = None) -> dict[str, Any]:
+               scheduler: str | None = None, ended: Callable[[str, Any], None] | None = None,
+               resume: Resume | None = None) -> dict[str, Any]:
     """Track each job ``(name, toa_path, receivers_path, options)`` (:func:`track_tag`, each with its own options) in
     worker processes (``workers``, default the CPU count; 1: one after another in this process) or on a Dask
-    scheduler's workers; ``ended(name, result)`` called as each ends. Returns name → the
+    scheduler's workers (each sent its tag's files: :func:`track_sent`, no shared filesystem assumed); ``ended(name,
+    result)`` called as each ends. With ``resume``, a tag kept by an interrupted run of the same inputs is taken
+    from it (:mod:`.resume`) and each tag that ends is kept. Returns name → the
     :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, or the one line of its refusal."""
     results: dict[str, Any] = {}
+    keys: dict[str, tuple[str, Path]] = {}
 
     def done(name: str, result) -> None:
+        if resume is not None and name in keys:
+            resume.save(keys[name][0], result, keys[name][1])
         results[name] = result
         if ended is not None:
             ended(name, result)
 
+    if resume is not None:
+        left = []
+        for job in jobs:
+            name, toa, receivers, options = job
+            key = job_key(toa, receivers, options)
+            kept = resume.load(key, toa.parent)
+            if kept is None:
+                keys[name] = (key, toa.parent)
+                left.append(job)
+            else:
+                done(name, kept)
+        jobs = left
+    if not jobs:
+        return results
     workers = workers or os.cpu_count() or 1
     if scheduler is not None:
         from sblsim.orchestrator.campaign.executors import close_client, connect
@@ -122,7 +184,7 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
         try:
             from distributed import as_completed
 
-            futures = {client.submit(track_tag, toa, receivers, options, pure=False): name
+            futures = {client.submit(track_sent, sent_files(toa, receivers, options), options, pure=False): name
                        for name, toa, receivers, options in jobs}
             for future in as_completed(futures, loop=client.loop):
                 done(futures[future], future.result())
@@ -173,7 +235,8 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
         workers instead.
     out : Path, optional
         Write each tracked tag's folder (``out/TAG/``, as ``sblsim replay --format toa``) and ``tags.csv`` there,
-        all or nothing when every tag has ended.
+        all or nothing when every tag has ended; each tag is kept as it ends (:mod:`.resume`), so that a run
+        interrupted and made again with the same inputs tracks only the tags it had not finished.
     progress : callable, optional
         Called with each tag's row, the tags ended and their number, as each ends.
 
@@ -193,7 +256,9 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
         if progress is not None:
             progress(rows[name], len(rows), len(files))
 
-    results = run_tracks([(n, f, Path(receivers), options) for f, n in zip(files, names)], workers, scheduler, ended)
+    resume = None if out is None else Resume(out)
+    results = run_tracks([(n, f, Path(receivers), options) for f, n in zip(files, names)], workers, scheduler, ended,
+                         resume)
     table = pd.DataFrame([rows[n] for n in names], columns=list(TAG_COLUMNS))
     outcomes = {n: r for n, r in results.items() if not isinstance(r, str)}
     if out is not None:
@@ -201,6 +266,7 @@ def track_tags(files: Sequence[Path], receivers: Path, options: dict[str, Any], 
             for name, outcome in outcomes.items():
                 write(outcome, tmp / name)
             table.to_csv(tmp / "tags.csv", index=False)
+        resume.remove()
     return TagsOutcome(table, outcomes)
 
 

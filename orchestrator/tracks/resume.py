@@ -1,0 +1,167 @@
+"""Finished tags kept across runs: a study (or a folder of tags) interrupted by Ctrl-C, a killed process or a full disk,
+run again with the same inputs and ``--out``, tracks only the tags it had not finished.
+
+Each tag's outcome is kept, as it ends, in a folder beside the output, ``.OUT.resume/`` (hidden, as the staging
+folders are), under the hash of everything its track depends on (:func:`job_key`: its times-of-arrival and receivers
+files' bytes, its options, each file an option names by its bytes, and sblsim's version). A run finds a tag's entry
+only where that hash is the same: a changed input is tracked again, never taken from before. The folder is removed
+when the run's output is written.
+
+An entry is written beside its place and renamed into it, so that a process killed while writing leaves nothing that
+looks done; it holds tables as Parquet, the summary and score as JSON and arrays as ``.npz`` read without pickles: an
+entry is data, never code. An entry that cannot be read is tracked again; a disk that cannot hold an entry is said
+once and the run goes on without keeping the others.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sblsim.orchestrator.io.version import installed_version
+from sblsim.orchestrator.tracks.outcome import TrackOutcome
+
+#: The file that marks a folder as sblsim's resume folder (a folder of that name without it is never used or removed).
+MARKER = "SBLSIM_RESUME"
+#: The tables of a :class:`TrackOutcome` kept as Parquet files of these names.
+TABLES = ("track", "estimates", "errors", "bound", "set_aside")
+#: The read size of a file hashed [bytes].
+_BLOCK = 1 << 20
+
+
+def resume_folder(out: Path) -> Path:
+    """The resume folder of the output folder ``out``: ``.NAME.resume`` beside it."""
+    out = Path(out).absolute()
+    return out.parent / f".{out.name}.resume"
+
+
+def _file_hash(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(_BLOCK), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _canonical(value: Any) -> Any:
+    """A JSON-able form of an option's value; a file named by the option taken by its bytes' hash."""
+    if isinstance(value, Path):
+        return {"file": _file_hash(value) if value.is_file() else f"missing {value.name}"}
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return repr(value)
+
+
+def job_key(toa: Path, receivers: Path, options: dict[str, Any]) -> str:
+    """The hash (SHA-256, hex) of what one tag's track depends on: sblsim's version, the times-of-arrival and
+    receivers files' bytes, and ``options`` (each value; a :class:`~pathlib.Path` by its file's bytes)."""
+    text = json.dumps({"version": installed_version(), "toa": _file_hash(toa), "receivers": _file_hash(receivers),
+                       "options": options}, sort_keys=True, default=_canonical)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class Resume:
+    """The kept outcomes of one output's tags (module docstring).
+
+    Parameters
+    ----------
+    out : Path
+        The run's output folder; its resume folder is :func:`resume_folder`.
+    """
+
+    def __init__(self, out: Path):
+        self.folder = resume_folder(out)
+        self.kept = 0  # entries found and taken by this run
+        self.usable = not self.folder.is_symlink() and (not os.path.lexists(self.folder)
+                                                        or (self.folder / MARKER).is_file())
+        if not self.usable:
+            warnings.warn(f"{str(self.folder)!r} is not sblsim's resume folder (a link, or no {MARKER} in it): "
+                          "finished tags are not kept for a rerun", stacklevel=2)
+
+    def load(self, key: str, where: Path) -> TrackOutcome | str | None:
+        """The outcome kept under ``key`` (a refusal as its line, the token of its folder made ``where``), or None
+        where none is kept or it cannot be read."""
+        entry = self.folder / key
+        if not self.usable or not entry.is_dir() or entry.is_symlink():
+            return None
+        try:
+            result = _read(entry, where)
+        except Exception:  # an entry damaged or not ours: tracked again
+            return None
+        self.kept += 1
+        return result
+
+    def save(self, key: str, result: TrackOutcome | str, where: Path) -> None:
+        """Keep ``result`` under ``key`` (``where``, the folder of the tag's files, made a token in a refusal's
+        line); a disk that cannot hold it is said once and the folder is not used again by this run."""
+        if not self.usable:
+            return
+        staging = self.folder / f".{key}.{os.getpid()}"
+        try:
+            if not self.folder.exists():
+                self.folder.mkdir()
+                (self.folder / MARKER).write_text("sblsim keeps finished tags here for a rerun; removed when the run "
+                                                  "ends\n")
+            shutil.rmtree(staging, ignore_errors=True)
+            staging.mkdir()
+            _write(staging, result, where)
+            os.replace(staging, self.folder / key)
+        except OSError as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            self.usable = False
+            warnings.warn(f"finished tags are no longer kept for a rerun ({str(self.folder)!r}: {exc.strerror or exc})",
+                          stacklevel=2)
+
+    def remove(self) -> None:
+        """Remove the resume folder (the run's output is written)."""
+        if self.usable and (self.folder / MARKER).is_file():
+            shutil.rmtree(self.folder, ignore_errors=True)
+
+
+#: What stands for a tag's folder in a kept refusal's line (its folder differs from run to run).
+_WHERE = "\x00where\x00"
+
+
+def _write(entry: Path, result: TrackOutcome | str, where: Path) -> None:
+    if isinstance(result, str):
+        (entry / "refusal.txt").write_text(result.replace(str(where), _WHERE), encoding="utf-8")
+        return
+    for name in TABLES:
+        table = getattr(result, name)
+        if table is not None:
+            table.to_parquet(entry / f"{name}.parquet")
+    meta = {"summary": result.summary, "score": result.score,
+            "array": None if result.array is None else list(result.array[0])}
+    (entry / "outcome.json").write_text(json.dumps(meta, allow_nan=False), encoding="utf-8")
+    arrays = {k: v for k, v in (("truth", result.truth),
+                                ("array", None if result.array is None else result.array[1])) if v is not None}
+    np.savez(entry / "arrays.npz", **arrays)
+
+
+def _read(entry: Path, where: Path) -> TrackOutcome | str:
+    import pandas as pd
+
+    refusal = entry / "refusal.txt"
+    if refusal.is_file():
+        return refusal.read_text(encoding="utf-8").replace(_WHERE, str(where))
+    meta = json.loads((entry / "outcome.json").read_text(encoding="utf-8"))
+    tables = {name: pd.read_parquet(entry / f"{name}.parquet") if (entry / f"{name}.parquet").is_file() else None
+              for name in TABLES}
+    with np.load(entry / "arrays.npz", allow_pickle=False) as arrays:
+        truth = arrays["truth"] if "truth" in arrays else None
+        positions = arrays["array"] if "array" in arrays else None
+    return TrackOutcome(tables["track"], tables["estimates"], tables["errors"], meta["score"], meta["summary"],
+                        tables["bound"], truth, None if meta["array"] is None else (meta["array"], positions),
+                        tables["set_aside"])
+
+
+__all__ = ["MARKER", "Resume", "TABLES", "job_key", "resume_folder"]
