@@ -157,8 +157,9 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
 
 
 def study_lines(outcome: Any) -> list[tuple[str, bool]]:
-    """The console's lines of a study once it has run, each with whether it is for standard error: its tags'
-    (:func:`tag_lines`, after the tags kept from an interrupted run), its reference tags' (:func:`reference_lines`) and its refined positions'
+    """The console's lines of a study once it has run, each with whether it is for standard error: the tags kept
+    from an interrupted run (:mod:`~sblsim.orchestrator.tracks.resume`), its tags' (:func:`tag_lines`), its
+    reference tags' (:func:`reference_lines`) and its refined positions'
     (:func:`~sblsim.orchestrator.telemetry.study_positions.lines`)."""
     from sblsim.orchestrator.telemetry.study_positions import lines  # numpy and pandas: loaded with the study
 
