@@ -27,6 +27,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator import cli
 from sblsim.orchestrator.io import stop
 from sblsim.orchestrator.io.progress import Progress
+from sblsim.orchestrator.tracks.resume import MARKER
 from tests.helpers import start_for_signals
 
 #: The most a command may take to end after the signal [s] (the issue's bound).
@@ -338,7 +339,8 @@ def test_a_long_command_stops_cleanly_at_any_point(warm, tmp_path, name, point, 
     """Signalled ``point`` seconds into its work (the command alone, as a scheduler signals it, or its whole process
     group, as a terminal's Ctrl-C): 128 + the signal within 5 s, one line after the signal (the lines before it are
     its notes and progress), no traceback (of its workers either), and no output: no folder (a campaign keeps the
-    chunks it finished, to resume, but no runs.parquet), no lock, no staging folder."""
+    chunks it finished, to resume, but no runs.parquet; a study the tags it finished, beside its output), no lock,
+    no staging folder."""
     import threading
 
     args, begun, _, _ = LONG[name]
@@ -381,5 +383,7 @@ def test_a_long_command_stops_cleanly_at_any_point(warm, tmp_path, name, point, 
     left = sorted(p.name for p in tmp_path.iterdir())
     if name.startswith("campaign"):
         assert left in ([], ["o"]) and not (tmp_path / "o" / "runs.parquet").exists(), left
+    elif name == "track":  # the tags it finished, kept for a rerun (marked sblsim's), and nothing else
+        assert left in ([], [".o.resume"]) and (not left or (tmp_path / left[0] / MARKER).is_file()), left
     else:
         assert left == [], left
