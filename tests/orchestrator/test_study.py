@@ -266,3 +266,20 @@ def test_a_sheet_s_interval_the_detections_contradict_is_said_and_taken_with_for
     assert len(said) == 1 and said[0].startswith(f"tag {forced.tags.iloc[0]['tag']}:")
     with pytest.raises(sblsim.ConfigError, match="^force_interval: 'yes' is not True or False$"):
         sblsim.track(files["detections"], force_interval="yes", **common)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", [{"workers": 2}, {"workers": 2, "scheduler": "local"}],
+                         ids=["2 worker processes", "a local Dask cluster"])
+def test_worker_processes_and_a_dask_cluster_write_the_study_of_one_process(study, tmp_path, how):
+    """The study in two worker processes, and on a local Dask cluster (each worker sent its tag's files): every
+    track's file to the byte as the fixture's study made in one process."""
+    _, files, _, folder = study
+    sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], out=tmp_path / "o", **how)
+    one, many = folder / "out", tmp_path / "o"
+    assert (many / "tracks.csv").read_bytes() == (one / "tracks.csv").read_bytes()
+    tags = sorted(p.name for p in (one / "tags").iterdir() if (p / "track.csv").is_file())
+    assert tags and tags == sorted(p.name for p in (many / "tags").iterdir() if (p / "track.csv").is_file())
+    for tag in tags:
+        for name in ("track.csv", "estimates.csv"):
+            assert (many / "tags" / tag / name).read_bytes() == (one / "tags" / tag / name).read_bytes(), (tag, name)
