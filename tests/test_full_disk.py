@@ -179,3 +179,29 @@ def test_design_on_a_full_disk_writes_nothing(small_disk, tmp_path):
     line = _one_line(_sblsim("design", "small.toml", "--out", disk / "d", cwd=tmp_path))
     assert "No space left on device" in line
     assert list(disk.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_study_on_a_full_disk_keeps_its_tracked_tags_and_resumes_to_the_same_tracks(small_disk, tmp_path):
+    """``sblsim track`` whose disk fills as it writes its output (1.2 MB: the tags tracked and kept, the study's
+    1.8 MB of files not): one line, exit 2, no output; run again on a larger disk, every tag taken from the kept
+    ones, and the tracks those of a study on a disk with room."""
+    from sblsim.orchestrator.telemetry.simulate import simulate_study
+    from sblsim.orchestrator.tracks.resume import resume_folder
+
+    disk, resize = small_disk
+    files = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=1, seed=4).write(tmp_path / "vue", "vue")
+    args = ("track", files["detections"], "--receivers", files["deployments"], "--tags", files["tags"],
+            "--workers", "1", "--out")
+    resize("1200k")
+    line = _one_line(_sblsim(*args, disk / "o", cwd=tmp_path))
+    assert "No space left on device" in line
+    assert [p.name for p in disk.iterdir()] == [resume_folder(disk / "o").name]
+    resize("64m")
+    resumed = _sblsim(*args, disk / "o", cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert "resumed: 3 of 3 tags kept" in resumed.stdout
+    whole = _sblsim(*args, tmp_path / "whole", cwd=tmp_path)
+    assert whole.returncode == 0, whole.stderr[-2000:]
+    assert (disk / "o" / "tracks.csv").read_bytes() == (tmp_path / "whole" / "tracks.csv").read_bytes()
+    assert sorted(p.name for p in disk.iterdir()) == ["o"]

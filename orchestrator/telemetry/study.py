@@ -346,7 +346,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         kept = 0 if resume is None else resume.kept
         results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
         if resume is not None and resume.kept > kept:
-            summary["resumed"] = {"tags_kept": resume.kept - kept}
+            summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs)}
         # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
         outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
         table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
