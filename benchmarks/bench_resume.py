@@ -7,9 +7,9 @@ Run:  python benchmarks/bench_resume.py [--receivers 20] [--tags 40] [--days 2] 
 The study is the telemetry benchmark's (:func:`sblsim.orchestrator.telemetry.simulate.simulate_study`, a VUE
 export). ``sblsim track`` runs it whole (timed: the baseline of this run), then again into another ``--out``,
 stopped (SIGKILL, or SIGINT: Ctrl-C) once half its tags are kept in the output's resume folder, then run a third
-time with the same ``--out``. Printed: each run's seconds, the tags the rerun kept, the interrupted pair's total
-over the whole run (the target: at most 1.1) and whether every tag's ``track.csv`` is the whole run's to the byte.
-A JSON line last.
+time with the same ``--out`` (taking the kept synchronisation and tags). Printed: each run's seconds, the tags the
+rerun kept, the interrupted pair's total over the whole run (the target: at most 1.1) and whether every tag's
+``track.csv`` is the whole run's to the byte. A JSON line last.
 """
 
 from __future__ import annotations
@@ -42,8 +42,9 @@ def _timed(command: list[str]) -> float:
 
 
 def _kept(out: Path) -> int:
+    """The tags kept in ``out``'s resume folder (its entries but the synchronisation's)."""
     folder = resume_folder(out)
-    return sum(1 for p in folder.iterdir() if len(p.name) == 64) if folder.is_dir() else 0
+    return max(sum(1 for p in folder.iterdir() if len(p.name) == 64) - 1, 0) if folder.is_dir() else 0
 
 
 def main() -> None:

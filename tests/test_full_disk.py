@@ -200,7 +200,7 @@ def test_a_study_on_a_full_disk_keeps_its_tracked_tags_and_resumes_to_the_same_t
     resize("64m")
     resumed = _sblsim(*args, disk / "o", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
-    assert "resumed: 3 of 3 tags kept" in resumed.stdout
+    assert "resumed: 3 of 3 tags and the synchronisation kept" in resumed.stdout
     whole = _sblsim(*args, tmp_path / "whole", cwd=tmp_path)
     assert whole.returncode == 0, whole.stderr[-2000:]
     assert (disk / "o" / "tracks.csv").read_bytes() == (tmp_path / "whole" / "tracks.csv").read_bytes()

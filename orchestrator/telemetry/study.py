@@ -59,9 +59,10 @@ from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
+from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.report.daily import daily_counts
-from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, study_clocks
+from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
@@ -268,8 +269,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
 
     def attempt(deployments, assigned, notes: list[str], workdir: Path) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``."""
-        clocks, table, clocks_info, synced = study_clocks(sync, assigned, deployments, sound_speed, series, bin_hours,
-                                                          notes)
+        clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
+                                                               series, bin_hours, notes)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
         groups = assigned.detections.frame.groupby("tag", sort=False).groups
@@ -345,8 +346,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
 
         kept = 0 if resume is None else resume.kept
         results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
-        if resume is not None and resume.kept > kept:
-            summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs)}
+        if resume is not None and (resume.kept > kept or resume.taken):
+            summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
+            resume.taken.clear()
         # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
         outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
         table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))

@@ -164,8 +164,10 @@ def study_lines(outcome: Any) -> list[tuple[str, bool]]:
     from sblsim.orchestrator.telemetry.study_positions import lines  # numpy and pandas: loaded with the study
 
     resumed = outcome.summary.get("resumed")
-    kept = [(f"resumed: {resumed['tags_kept']} of {resumed['tags']} tags kept from an interrupted run of this output "
-             "(their inputs unchanged)", False)] if resumed else []
+    kept = []
+    if resumed:
+        what = " and ".join([f"{resumed['tags_kept']} of {resumed['tags']} tags"] + resumed["taken"])
+        kept.append((f"resumed: {what} kept from an interrupted run of this output (their inputs unchanged)", False))
     return (kept + tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
             + lines(outcome.summary.get("positions")))
 

@@ -21,7 +21,7 @@ import os
 import shutil
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -80,29 +80,27 @@ class Resume:
 
     def __init__(self, out: Path):
         self.folder = resume_folder(out)
-        self.kept = 0  # entries found and taken by this run
+        self.kept = 0  # tags' outcomes found and taken by this run
+        self.taken: list[str] = []  # what else this run took from the folder, in words ("the synchronisation")
         self.usable = not self.folder.is_symlink() and (not os.path.lexists(self.folder)
                                                         or (self.folder / MARKER).is_file())
         if not self.usable:
             warnings.warn(f"{str(self.folder)!r} is not sblsim's resume folder (a link, or no {MARKER} in it): "
                           "finished tags are not kept for a rerun", stacklevel=2)
 
-    def load(self, key: str, where: Path) -> TrackOutcome | str | None:
-        """The outcome kept under ``key`` (a refusal as its line, the token of its folder made ``where``), or None
-        where none is kept or it cannot be read."""
+    def fetch(self, key: str, read: Callable[[Path], Any]) -> Any:
+        """``read(entry)`` of the entry kept under ``key``, or None where none is kept or it cannot be read."""
         entry = self.folder / key
         if not self.usable or not entry.is_dir() or entry.is_symlink():
             return None
         try:
-            result = _read(entry, where)
-        except Exception:  # an entry damaged or not ours: tracked again
+            return read(entry)
+        except Exception:  # an entry damaged or not ours: made again
             return None
-        self.kept += 1
-        return result
 
-    def save(self, key: str, result: TrackOutcome | str, where: Path) -> None:
-        """Keep ``result`` under ``key`` (``where``, the folder of the tag's files, made a token in a refusal's
-        line); a disk that cannot hold it is said once and the folder is not used again by this run."""
+    def store(self, key: str, write: Callable[[Path], None]) -> None:
+        """Keep an entry under ``key``: ``write(folder)`` fills a folder of a temporary name, renamed ``key`` once
+        whole; a disk that cannot hold it is said once and the folder is not used again by this run."""
         if not self.usable:
             return
         staging = self.folder / f".{key}.{os.getpid()}"
@@ -113,13 +111,29 @@ class Resume:
                                                   "ends\n")
             shutil.rmtree(staging, ignore_errors=True)
             staging.mkdir()
-            _write(staging, result, where)
+            write(staging)
             os.replace(staging, self.folder / key)
         except OSError as exc:
             shutil.rmtree(staging, ignore_errors=True)
             self.usable = False
             warnings.warn(f"finished tags are no longer kept for a rerun ({str(self.folder)!r}: {exc.strerror or exc})",
                           stacklevel=2)
+        except Exception as exc:  # a table a file format cannot hold: this entry made again on a rerun, nothing lost
+            shutil.rmtree(staging, ignore_errors=True)
+            said = " ".join(str(exc).split())[:200]
+            warnings.warn(f"an outcome is not kept for a rerun ({type(exc).__name__}: {said})", stacklevel=2)
+
+    def load(self, key: str, where: Path) -> TrackOutcome | str | None:
+        """The tag's outcome kept under ``key`` (a refusal as its line, the token of its folder made ``where``), or
+        None where none is kept or it cannot be read."""
+        result = self.fetch(key, lambda entry: _read(entry, where))
+        self.kept += result is not None
+        return result
+
+    def save(self, key: str, result: TrackOutcome | str, where: Path) -> None:
+        """Keep a tag's ``result`` under ``key`` (``where``, the folder of the tag's files, made a token in a
+        refusal's line)."""
+        self.store(key, lambda entry: _write(entry, result, where))
 
     def remove(self) -> None:
         """Remove the resume folder (the run's output is written)."""

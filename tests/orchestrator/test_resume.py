@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -161,8 +162,9 @@ def test_a_worker_tracks_copies_of_the_files_and_names_them_as_sent(tracked, tmp
 
 @pytest.mark.slow
 def test_a_study_killed_mid_way_and_run_again_writes_the_uninterrupted_tracks(tmp_path):
-    """``sblsim track`` killed (SIGKILL) once its first tag is kept, then run again with the same ``--out``: the
-    finished tag is not tracked again (study.json's ``resumed``), and every track is the uninterrupted run's."""
+    """``sblsim track`` killed (SIGKILL) once its synchronisation and first tag are kept, then run again with the
+    same ``--out``: neither is made again (study.json's ``resumed``), and every track and the synchronisation's files
+    are the uninterrupted run's."""
     from sblsim.orchestrator.telemetry.simulate import simulate_study
 
     sim = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=1, seed=4)
@@ -175,7 +177,7 @@ def test_a_study_killed_mid_way_and_run_again_writes_the_uninterrupted_tracks(tm
     kept = resume_folder(tmp_path / "out")
     deadline = time.monotonic() + 300
     while stopped.poll() is None and time.monotonic() < deadline:
-        if kept.is_dir() and any(len(p.name) == 64 for p in kept.iterdir()):
+        if kept.is_dir() and sum(len(p.name) == 64 for p in kept.iterdir()) >= 2:  # the synchronisation, a tag
             break
         time.sleep(0.05)
     assert stopped.poll() is None, "the study ended before a tag was kept"
@@ -183,9 +185,15 @@ def test_a_study_killed_mid_way_and_run_again_writes_the_uninterrupted_tracks(tm
     stopped.wait()
     assert not (tmp_path / "out").exists()
     again = subprocess.run(command + ["--out", str(tmp_path / "out")], check=True, capture_output=True, text=True)
-    assert "tags kept from an interrupted run" in again.stdout
-    summary = pd.read_json(tmp_path / "out" / "study.json", typ="series")
-    assert summary["resumed"]["tags_kept"] >= 1 and not kept.exists()
+    assert "tags and the synchronisation kept from an interrupted run" in again.stdout
+    summary = json.loads((tmp_path / "out" / "study.json").read_text())
+    assert summary["resumed"]["tags_kept"] >= 1 and summary["resumed"]["taken"] == ["the synchronisation"]
+    assert not kept.exists()
+    for name in ("sync.json", "offsets.csv", "residuals.csv", "sync_tags.csv"):  # the kept synchronisation's files
+        mine, whole_run = ((folder / "sync" / name).read_text() for folder in (tmp_path / "out", tmp_path / "whole"))
+        if name == "sync.json":  # but the time the synchronisation took
+            mine, whole_run = (re.sub(r'"wall_time_s": [0-9.e+-]+', "", t) for t in (mine, whole_run))
+        assert mine == whole_run, name
     whole = pd.read_csv(tmp_path / "whole" / "tracks.csv")
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out" / "tracks.csv"), whole)
     tags = [p.name for p in (tmp_path / "whole" / "tags").iterdir()]
