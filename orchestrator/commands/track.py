@@ -162,9 +162,7 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
-        ``sync/``, ``tags/``: a folder per tag), all or nothing; the synchronisation and each tag kept as they end
-        beside it (``.OUT.resume/``), so that a study stopped part way and run again with the same inputs and
-        ``out`` makes only what it had not finished (``summary["resumed"]``: docs/telemetry.md).
+        ``sync/``, ``tags/``: a folder per tag), all or nothing; stopped and run again, it resumes (docs/telemetry.md).
     force : bool
         Replace an earlier study in ``out``.
     progress : bool, str or callable
