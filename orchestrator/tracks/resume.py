@@ -1,5 +1,7 @@
 """Finished tags kept across runs: a study (or a folder of tags) interrupted by Ctrl-C, a killed process or a full disk,
-run again with the same inputs and ``--out``, tracks only the tags it had not finished.
+run again with the same inputs and ``--out``, tracks only the tags it had not finished (and a study takes its kept
+synchronisation: :mod:`~sblsim.orchestrator.telemetry.kept_clocks`, through :meth:`Resume.store` and
+:meth:`Resume.fetch`).
 
 Each tag's outcome is kept, as it ends, in a folder beside the output, ``.OUT.resume/`` (hidden, as the staging
 folders are), under the hash of everything its track depends on (:func:`job_key`: its times-of-arrival and receivers
