@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 import sys
 import tomllib
@@ -17,6 +16,7 @@ from sblsim.orchestrator.campaign.errors import CampaignError
 from sblsim.orchestrator.campaign.plan import Chunk
 from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.io import tomlfile
+from sblsim.orchestrator.io.manifest import file_digest
 from sblsim.orchestrator.io.output import refuse_link, write_atomic
 
 
@@ -28,15 +28,6 @@ def write_parquet(frame: pd.DataFrame, path: Path) -> None:
 MANIFEST = "manifest.json"
 #: The manifest's entry recording the chunk plan (engine, batch size), beside the chunks' entries.
 PLAN = "_plan"
-
-
-def file_digest(path: Path) -> str:
-    """SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def read_manifest(out: Path) -> dict[str, dict] | None:

@@ -17,7 +17,6 @@ from sblsim.orchestrator.campaign.errors import CampaignError, CampaignInterrupt
 from sblsim.orchestrator.campaign.executors import check_address, close_client, connect, execute, start_pool, stop_pool
 from sblsim.orchestrator.campaign.manifest import (
     PLAN,
-    file_digest,
     manifest_entry,
     prepare_directory,
     read_manifest,
@@ -31,6 +30,7 @@ from sblsim.orchestrator.campaign.study import Study
 from sblsim.orchestrator.cosim.engines import ENGINES
 from sblsim.orchestrator.cosim.fmu_files import fmu_paths
 from sblsim.orchestrator.cosim.limits import check_steps
+from sblsim.orchestrator.io.manifest import file_digest
 from sblsim.orchestrator.io.progress import Progress
 
 

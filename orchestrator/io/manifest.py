@@ -12,6 +12,7 @@ is replaced on its word).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -101,4 +102,14 @@ def write_manifest(out: Path, names: Iterable[str]) -> None:
     os.replace(temporary, out / MANIFEST)
 
 
-__all__ = ["MANIFEST", "MAX_MANIFEST_BYTES", "foreign", "recorded", "refuse_foreign", "write_manifest"]
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes (hex), read a MiB at a time: what a campaign's manifest records of its series and
+    what a rerun's kept work is keyed by (:mod:`sblsim.orchestrator.tracks.resume`)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+__all__ = ["MANIFEST", "MAX_MANIFEST_BYTES", "file_digest", "foreign", "recorded", "refuse_foreign", "write_manifest"]

@@ -25,7 +25,7 @@ from sblsim.orchestrator.io.version import installed_version
 from sblsim.orchestrator.sync.clocks import offsets_clocks
 from sblsim.orchestrator.sync.run import SyncOutcome
 from sblsim.orchestrator.telemetry.study_clocks import study_clocks
-from sblsim.orchestrator.tracks.resume import Resume
+from sblsim.orchestrator.tracks.resume import Resume, read_tables, write_tables
 
 #: The tables of a :class:`~sblsim.orchestrator.sync.run.SyncOutcome` kept as Parquet files of these names.
 TABLES = ("offsets", "residuals", "sync_tags", "receivers", "positions")
@@ -59,10 +59,7 @@ def clocks_key(assigned, sound_speed: float | None, series: tuple[np.ndarray, np
 
 
 def _write(entry: Path, outcome: SyncOutcome, info: dict[str, Any]) -> None:
-    for name in TABLES:
-        table = getattr(outcome, name)
-        if table is not None:
-            table.to_parquet(entry / f"{name}.parquet")
+    write_tables(entry, outcome, TABLES)
     arrays, rest = {}, {}
     for item in fields(ClockFit):
         value = getattr(outcome.fit, item.name)
@@ -79,8 +76,7 @@ def _write(entry: Path, outcome: SyncOutcome, info: dict[str, Any]) -> None:
 
 def _read(entry: Path) -> tuple[SyncOutcome, dict[str, Any]]:
     meta = json.loads((entry / "outcome.json").read_text(encoding="utf-8"))
-    tables = {name: pd.read_parquet(entry / f"{name}.parquet") if (entry / f"{name}.parquet").is_file() else None
-              for name in TABLES}
+    tables = read_tables(entry, TABLES)
     with np.load(entry / "fit.npz", allow_pickle=False) as kept:
         arrays = {name: kept[name] for name in kept.files}
     rest = meta["fit"]

@@ -27,6 +27,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from sblsim.orchestrator.io.manifest import file_digest
 from sblsim.orchestrator.io.version import installed_version
 from sblsim.orchestrator.tracks.outcome import TrackOutcome
 
@@ -34,8 +35,6 @@ from sblsim.orchestrator.tracks.outcome import TrackOutcome
 MARKER = "SBLSIM_RESUME"
 #: The tables of a :class:`TrackOutcome` kept as Parquet files of these names.
 TABLES = ("track", "estimates", "errors", "bound", "set_aside")
-#: The read size of a file hashed [bytes].
-_BLOCK = 1 << 20
 
 
 def resume_folder(out: Path) -> Path:
@@ -44,18 +43,10 @@ def resume_folder(out: Path) -> Path:
     return out.parent / f".{out.name}.resume"
 
 
-def _file_hash(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(_BLOCK), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _canonical(value: Any) -> Any:
     """A JSON-able form of an option's value; a file named by the option taken by its bytes' hash."""
     if isinstance(value, Path):
-        return {"file": _file_hash(value) if value.is_file() else f"missing {value.name}"}
+        return {"file": file_digest(value) if value.is_file() else f"missing {value.name}"}
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):
@@ -66,7 +57,7 @@ def _canonical(value: Any) -> Any:
 def job_key(toa: Path, receivers: Path, options: dict[str, Any]) -> str:
     """The hash (SHA-256, hex) of what one tag's track depends on: sblsim's version, the times-of-arrival and
     receivers files' bytes, and ``options`` (each value; a :class:`~pathlib.Path` by its file's bytes)."""
-    text = json.dumps({"version": installed_version(), "toa": _file_hash(toa), "receivers": _file_hash(receivers),
+    text = json.dumps({"version": installed_version(), "toa": file_digest(toa), "receivers": file_digest(receivers),
                        "options": options}, sort_keys=True, default=_canonical)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -143,6 +134,23 @@ class Resume:
             shutil.rmtree(self.folder, ignore_errors=True)
 
 
+def write_tables(entry: Path, holder: Any, names: tuple[str, ...]) -> None:
+    """Each of ``holder``'s tables ``names`` (attributes: pandas DataFrames, or None: not written) as
+    ``entry/NAME.parquet``."""
+    for name in names:
+        table = getattr(holder, name)
+        if table is not None:
+            table.to_parquet(entry / f"{name}.parquet")
+
+
+def read_tables(entry: Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """The tables :func:`write_tables` wrote, by name (None where one was not written)."""
+    import pandas as pd
+
+    return {name: pd.read_parquet(entry / f"{name}.parquet") if (entry / f"{name}.parquet").is_file() else None
+            for name in names}
+
+
 #: What stands for a tag's folder in a kept refusal's line (its folder differs from run to run).
 _WHERE = "\x00where\x00"
 
@@ -151,10 +159,7 @@ def _write(entry: Path, result: TrackOutcome | str, where: Path) -> None:
     if isinstance(result, str):
         (entry / "refusal.txt").write_text(result.replace(str(where), _WHERE), encoding="utf-8")
         return
-    for name in TABLES:
-        table = getattr(result, name)
-        if table is not None:
-            table.to_parquet(entry / f"{name}.parquet")
+    write_tables(entry, result, TABLES)
     meta = {"summary": result.summary, "score": result.score,
             "array": None if result.array is None else list(result.array[0])}
     (entry / "outcome.json").write_text(json.dumps(meta, allow_nan=False), encoding="utf-8")
@@ -164,14 +169,11 @@ def _write(entry: Path, result: TrackOutcome | str, where: Path) -> None:
 
 
 def _read(entry: Path, where: Path) -> TrackOutcome | str:
-    import pandas as pd
-
     refusal = entry / "refusal.txt"
     if refusal.is_file():
         return refusal.read_text(encoding="utf-8").replace(_WHERE, str(where))
     meta = json.loads((entry / "outcome.json").read_text(encoding="utf-8"))
-    tables = {name: pd.read_parquet(entry / f"{name}.parquet") if (entry / f"{name}.parquet").is_file() else None
-              for name in TABLES}
+    tables = read_tables(entry, TABLES)
     with np.load(entry / "arrays.npz", allow_pickle=False) as arrays:
         truth = arrays["truth"] if "truth" in arrays else None
         positions = arrays["array"] if "array" in arrays else None
@@ -180,4 +182,4 @@ def _read(entry: Path, where: Path) -> TrackOutcome | str:
                         tables["set_aside"])
 
 
-__all__ = ["MARKER", "Resume", "TABLES", "job_key", "resume_folder"]
+__all__ = ["MARKER", "Resume", "TABLES", "job_key", "read_tables", "resume_folder", "write_tables"]
