@@ -255,23 +255,37 @@ def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
         mine = np.flatnonzero(receiver == r)
         steps = back[receiver[back] == r]
         k = int(steps[0])
-        where = (f"{what}: {name!r} line {lines[k]}: receiver {r}'s clock goes back {-step[k]:.6g} s from line "
-                 f"{lines[int(previous[k])]}")
-        if len(steps) > MAX_CLOCK_RESETS:
-            raise ModelError(f"{where} ({len(steps)} such steps in the file): rows not in the receiver's own order; "
-                             f"allowed: each receiver's rows in the order it logged them, its time going back at "
-                             f"most {MAX_CLOCK_RESETS} times (a clock reset)")
         tags = frame["tag"].to_numpy(dtype=object)[mine]
-        sets = [set(tags[part[mine] == p]) for p in range(1, len(steps) + 2)]
-        if all(not (a & b) for a, b in zip(sets[:-1], sets[1:])):
-            raise ModelError(f"{where} where its tag changes, its parts sharing no tag: rows sorted by tag, not in "
-                             "the receiver's own order; allowed: each receiver's rows in the order it logged them "
-                             "(its time going back only at a clock reset)")
+        check_parts(r, int(lines[k]), int(lines[int(previous[k])]), float(step[k]), len(steps),
+                    [set(tags[part[mine] == p]) for p in range(1, len(steps) + 2)], name, what)
     frame["clock_part"] = part
     time = frame["time"].to_numpy(float)
     return [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(lines[int(previous[k])]),
              "step_s": float(step[k]), "before_s": float(time[int(previous[k])]), "after_s": float(time[k]),
              "clock_part": int(part[k])} for k in back]
+
+
+def check_parts(receiver: str, line: int, previous_line: int, step: float, resets: int, tags: list[set], name: str,
+                what: str) -> None:
+    """Refuse a receiver's clock parts that are not its logging order (:func:`clock_parts`): more than
+    :data:`MAX_CLOCK_RESETS` resets, or parts sharing no tag with the next (``tags``: each part's tags, in order);
+    ``line``, ``previous_line`` and ``step`` [s] are its first reset's.
+
+    Raises
+    ------
+    ModelError
+        One line naming the line, the receiver and the step.
+    """
+    where = (f"{what}: {name!r} line {line}: receiver {receiver}'s clock goes back {-step:.6g} s from line "
+             f"{previous_line}")
+    if resets > MAX_CLOCK_RESETS:
+        raise ModelError(f"{where} ({resets} such steps in the file): rows not in the receiver's own order; "
+                         f"allowed: each receiver's rows in the order it logged them, its time going back at "
+                         f"most {MAX_CLOCK_RESETS} times (a clock reset)")
+    if all(not (a & b) for a, b in zip(tags[:-1], tags[1:])):
+        raise ModelError(f"{where} where its tag changes, its parts sharing no tag: rows sorted by tag, not in "
+                         "the receiver's own order; allowed: each receiver's rows in the order it logged them "
+                         "(its time going back only at a clock reset)")
 
 
 def reset_line(reset: dict) -> str:
@@ -284,4 +298,4 @@ def reset_line(reset: dict) -> str:
 
 
 __all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "LOGGED", "MAX_CLOCK_RESETS", "NETWORKS", "SORTED",
-           "clock_parts", "format_of", "read_detections", "reset_line", "sniff_format"]
+           "check_parts", "clock_parts", "format_of", "read_detections", "reset_line", "sniff_format"]

@@ -1,0 +1,367 @@
+"""A detections file read into a store (:mod:`sblsim.orchestrator.store`) a piece at a time, in memory bounded by the
+piece, not the file: ``sblsim store``.
+
+The file is read in pieces of about :data:`PIECE_BYTES` bytes, each cut at a line's end (where the quotes of the piece
+are balanced: a quoted cell spanning lines is never cut; in a Fathom CSV, before a ``DET`` record, so that a
+detection's ``DET_SENS`` records stay with it), and each piece is read by the very reader of
+:func:`~sblsim.orchestrator.readers.detections.read_detections` under the file's header (a Fathom piece under the
+``_DESC`` lines in force there): the same cells checked with the same rules and errors, naming the file's own lines.
+What a reader judges over the whole file is carried from piece to piece: each receiver's clock parts (its time going
+back in the file's order: :class:`ClockParts`, as :func:`~sblsim.orchestrator.readers.detections.clock_parts`), the
+encoding (a file not UTF-8 is read again in Latin-1, as the whole-file reader decodes it), the counts of tags and
+receivers. A network extract (GLATOS, OTN) is stored in its file's order; its rows are put in each receiver's order
+and its exact duplicates dropped as they are read back (:mod:`.query`), a tag at a time.
+
+The row and size limits of the whole-file reader become the disk's: the store is written only where the disk holds
+the file's size free (a Parquet store of detections is a fraction of its CSV: zstd and dictionary-encoded columns),
+said before the work; a disk that fills on the way leaves nothing (the store is written in a staging folder, moved
+into place when complete: :func:`~sblsim.orchestrator.io.output.staged_directory`). A line is still at most 1 MiB
+and 512 cells, a piece's cells bounded, the file a regular file and no receiver's binary log.
+
+The store's files: ``store.json`` (what was read: the file's name, size and SHA-256, the format, the encoding, the
+rows, each tag's and receiver's detections, the time span, the clock resets, the columns not used; written last)
+and ``detections/part-NNNNN.parquet``, one per piece, its rows sorted by tag and line (row groups of
+:data:`ROW_GROUP` rows, so that a tag's rows are read alone by their statistics), zstd-compressed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+import time as clock
+from collections import Counter
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.output import staged_directory
+from sblsim.orchestrator.io.progress import Progress, ProgressSpec
+from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, check_cells, regular_file
+from sblsim.orchestrator.io.version import installed_version
+from sblsim.orchestrator.readers import actel, fathom, glatos, otn, thelma, vue, yaps
+from sblsim.orchestrator.readers.binary import not_text, refuse_log
+from sblsim.orchestrator.readers.cells import text_table
+from sblsim.orchestrator.readers.detections import CLOCK_TOLERANCE, LOGGED, NETWORKS, SORTED, check_parts, sniff_format
+from sblsim.orchestrator.readers.formats import FORMATS
+from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
+
+#: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: about 0.3 GiB of
+#: text cells for a VUE export's 16 MiB).
+PIECE_BYTES = 16 * 2**20
+#: The smallest piece allowed [bytes].
+MIN_PIECE_BYTES = 4096
+#: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
+ROW_GROUP = 65536
+#: The store's description, written last, and the value of its ``marker`` key.
+STORE_FILE = "store.json"
+MARKER = "sblsim detections store"
+#: The layout's version (``store.json``'s ``layout``).
+LAYOUT = 1
+#: Each format's reader (:func:`~sblsim.orchestrator.readers.detections.read_detections`'s).
+READERS = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos, "otn": otn.otn,
+           "actel": actel.actel, "thelma": thelma.thelma}
+_DESC = {record: re.compile(rf'^"?{record}_DESC"?,[^\n]*', re.M) for record in fathom.FATHOM_RECORDS}
+_WHAT = "detections"
+
+
+class _NotUtf8(Exception):
+    """A piece that is not UTF-8: the file is read again in Latin-1."""
+
+
+class ClockParts:
+    """Each receiver's clock parts judged across pieces read in the file's order, as
+    :func:`~sblsim.orchestrator.readers.detections.clock_parts` judges them in the whole file: :meth:`add` gives a
+    piece's rows their ``clock_part`` (1 first), :meth:`finish` refuses a receiver whose rows are not in its logging
+    order and returns the resets."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.last: dict[str, tuple[float, int]] = {}  # receiver -> its last time [s] and line
+        self.part: dict[str, int] = {}
+        self.tags: dict[tuple[str, int], set] = {}
+        self.resets: list[dict] = []
+
+    def add(self, frame: pd.DataFrame) -> None:
+        """Set ``frame["clock_part"]`` (in place) for a piece's rows, in the file's order."""
+        receiver = frame["receiver"].to_numpy(dtype=object)
+        time = frame["time"].to_numpy(float)
+        lines = frame["line"].to_numpy(np.int64)
+        group = frame.groupby("receiver", sort=False)
+        before = group["time"].shift().to_numpy(float, copy=True)
+        before_line = group["line"].shift().to_numpy(float, copy=True)
+        first = np.flatnonzero(np.isnan(before))
+        for k in first:
+            last = self.last.get(receiver[k])
+            if last is not None:
+                before[k], before_line[k] = last
+        step = time - before
+        back = np.flatnonzero(step < -CLOCK_TOLERANCE)
+        reset = np.zeros(len(frame), np.int64)
+        reset[back] = 1
+        base = np.fromiter((self.part.get(r, 1) for r in receiver), np.int64, len(receiver))
+        part = pd.Series(reset).groupby(receiver, sort=False).cumsum().to_numpy() + base
+        frame["clock_part"] = part
+        self.resets += [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(before_line[k]),
+                         "step_s": float(step[k]), "before_s": float(before[k]), "after_s": float(time[k]),
+                         "clock_part": int(part[k])} for k in back]
+        for (r, p), tags in frame.groupby(["receiver", "clock_part"], sort=False)["tag"].unique().items():
+            self.tags.setdefault((r, int(p)), set()).update(tags)
+        ends = frame.drop_duplicates("receiver", keep="last")
+        for r, t, line, p in zip(ends["receiver"], ends["time"], ends["line"], ends["clock_part"]):
+            self.last[r], self.part[r] = (float(t), int(line)), int(p)
+
+    def finish(self) -> list[dict]:
+        """The resets in the file's order (:attr:`~sblsim.orchestrator.readers.detections.Detections.clock_resets`).
+
+        Raises
+        ------
+        ModelError
+            A receiver with more than the allowed resets, or whose parts share no tag
+            (:func:`~sblsim.orchestrator.readers.detections.check_parts`).
+        """
+        self.resets.sort(key=lambda reset: reset["line"])
+        for r in dict.fromkeys(reset["receiver"] for reset in self.resets):
+            mine = [reset for reset in self.resets if reset["receiver"] == r]
+            first = mine[0]
+            check_parts(r, first["line"], first["previous_line"], first["step_s"], len(mine),
+                        [self.tags.get((r, p), set()) for p in range(1, len(mine) + 2)], self.name, _WHAT)
+        return self.resets
+
+
+def _breaks(data: bytes) -> int:
+    """The line breaks in ``data`` (``\\n``, ``\\r\\n`` or a lone ``\\r``, as pandas ends a row)."""
+    return data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
+
+
+def _cut(data: bytes, fathom_file: bool) -> int:
+    """Where a piece ends in ``data``: after its last line end at which its quotes are balanced (in a Fathom file,
+    before its last ``DET`` record); 0 where there is none."""
+    end = data.rfind(b"\n") + 1
+    if fathom_file:
+        det = max(data.rfind(b"\nDET,", 0, end), data.rfind(b'\n"DET",', 0, end))
+        end = det + 1 if det > 0 else end
+    while end > 0 and data.count(b'"', 0, end) % 2:
+        end = data.rfind(b"\n", 0, end - 1) + 1
+    return end
+
+
+def pieces(handle, name: str, piece_bytes: int, fathom_file: bool) -> Iterator[tuple[bytes, int]]:
+    """The pieces of a file after its first line (:func:`_cut`), each with the number of its first line in the
+    file; each checked as the whole-file reader checks its text (no NUL byte, its lines' lengths and cells).
+
+    Raises
+    ------
+    ModelError
+        A NUL byte, a line longer than 1 MiB or of too many cells, a quoted cell spanning more than a piece.
+    """
+    rest, line = b"", 2
+    while True:
+        data = handle.read(piece_bytes)
+        ended = not data
+        data = rest + data
+        if not data:
+            return
+        end = len(data) if ended else _cut(data, fathom_file)
+        if end == 0:
+            if len(data) > max(piece_bytes, MAX_LINE_BYTES) * 4:
+                raise ModelError(f"{_WHAT}: {name!r} line {line}: no line end where quotes close within "
+                                 f"{len(data) // 2**20} MiB; allowed: lines of at most 1 MiB, a quoted cell closed")
+            rest = data
+            continue
+        piece, rest = data[:end], data[end:]
+        nul = piece.find(b"\0")
+        if nul >= 0:
+            raise not_text(name, _WHAT, piece, nul)
+        check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
+        yield piece, line
+        line += _breaks(piece)
+        if ended:
+            return
+
+
+def _decoded(data: bytes, encoding: str) -> str:
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError:
+        raise _NotUtf8() from None
+
+
+def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: str
+                  ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
+    """A Fathom piece's ``DET`` (and ``DET_SENS``) tables under the ``_DESC`` lines in force (``descs``, updated
+    from the piece), their rows numbered by the file's lines; None where no ``DET_DESC`` has come yet."""
+    carried = [descs[record] for record in fathom.FATHOM_RECORDS if record in descs]
+    for record, desc in _DESC.items():
+        found = list(desc.finditer(text))
+        if found:
+            descs[record] = found[-1].group(0).rstrip("\r")
+    if "DET" not in descs:
+        return None
+    shift = line - (2 + len(carried))  # the piece's first line follows Fathom's first line and the carried lines
+    header, body, lines = fathom.fathom_records("\n".join([head, *carried, text]), name, _WHAT, MAX_DETECTIONS,
+                                                MAX_DETECTION_CELLS)
+    sensors = body.attrs.get("sensors")
+    if sensors is not None:
+        body.attrs["sensors"] = (sensors[0], sensors[1], [k + shift for k in sensors[2]])
+    return header, body, [k + shift for k in lines]
+
+
+def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress
+            ) -> Iterator[tuple[pd.DataFrame, list[str], set[int]]]:
+    """Each piece's detections (the format's reader), its header and the header's columns used."""
+    name = str(path)
+    with open(path, "rb") as handle:
+        first = handle.readline(MAX_LINE_BYTES + 2)
+        digest.update(first)
+        check_cells(first, name, _WHAT)
+        head = _decoded(first, encoding + ("-sig" if encoding == "utf-8" else "")).rstrip("\r\n")
+        descs: dict[str, str] = {}
+        for piece, line in pieces(handle, name, piece_bytes, format == "fathom"):
+            digest.update(piece)
+            progress.update(len(piece))
+            text = _decoded(piece, encoding)
+            if format == "fathom":
+                table = _fathom_piece(head, descs, text, line, name)
+                if table is None:
+                    continue
+                header, body, lines = table
+            else:
+                header, body, lines = text_table(head + "\n" + text, name, _WHAT, MAX_DETECTIONS, first_line=line - 1,
+                                                 max_cells=MAX_DETECTION_CELLS)
+            if not len(body):
+                continue
+            frame, used = READERS[format](header, body, lines, name, _WHAT)
+            if "line" not in frame:
+                frame["line"] = np.asarray(lines, np.int64)
+            yield frame.reset_index(drop=True), header, used
+
+
+def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
+    """Read ``path`` into ``folder`` (the staging folder's ``detections``); returns ``store.json``'s content."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    digest = hashlib.sha256()
+    clocks = None if format in NETWORKS else ClockParts(str(path))
+    tags: Counter = Counter()
+    receivers: Counter = Counter()
+    rows, span, ignored, files, columns = 0, [np.inf, -np.inf], None, 0, []
+    for frame, header, used in _frames(path, format, encoding, piece_bytes, digest, progress):
+        if clocks is not None:
+            clocks.add(frame)
+        columns = merged_columns(columns, list(frame.columns))
+        if ignored is None:
+            ignored = [h for k, h in enumerate(header) if k not in used and h]
+        tags.update(frame["tag"].value_counts().to_dict())
+        receivers.update(frame["receiver"].value_counts().to_dict())
+        rows += len(frame)
+        span = [min(span[0], float(frame["time"].min())), max(span[1], float(frame["time"].max()))]
+        table = pa.Table.from_pandas(frame.sort_values(["tag", "line"], kind="stable"), preserve_index=False)
+        pq.write_table(table, folder / f"part-{files:05d}.parquet", row_group_size=ROW_GROUP, compression="zstd")
+        files += 1
+    if not rows:
+        raise ModelError(f"{_WHAT}: {str(path)!r} holds a header and no detections")
+    resets = clocks.finish() if clocks is not None else []
+    return {"marker": MARKER, "layout": LAYOUT, "sblsim": installed_version(), "source": path.name,
+            "source_bytes": path.stat().st_size, "source_sha256": digest.hexdigest(), "format": format,
+            "encoding": encoding, "row_order": SORTED if format in NETWORKS else LOGGED, "rows": rows,
+            "files": files, "columns": columns, "time_span_s": span, "ignored_columns": ignored or [],
+            "clock_resets": resets,
+            "tags": dict(sorted(tags.items())), "receivers": dict(sorted(receivers.items()))}
+
+
+def merged_columns(known: list[str], more: list[str]) -> list[str]:
+    """The columns of pieces so far and a piece's (a column only some pieces have, a network extract's
+    ``receiver_note`` say), each new one placed before the known column that follows it in its piece."""
+    known = list(known)
+    for k, name in enumerate(more):
+        if name not in known:
+            after = next((c for c in more[k + 1:] if c in known), None)
+            known.insert(known.index(after) if after is not None else len(known), name)
+    return known
+
+
+def check_space(path: Path, out: Path, size: int) -> None:
+    """Refuse a store the disk under ``out`` cannot hold (less free than the file's ``size`` [bytes]), before the work.
+
+    Raises
+    ------
+    ModelError
+        One line naming both sizes.
+    """
+    probe = out.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    free = shutil.disk_usage(probe).free
+    if free < size:
+        raise ModelError(f"--out: {str(out)!r}: the store of {str(path)!r} needs up to {size / 2**20:,.1f} MiB "
+                         f"(the file's size) and the disk holds {free / 2**20:,.1f} MiB free; allowed: a folder on a "
+                         "disk with room for it")
+
+
+def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piece_bytes: int = PIECE_BYTES,
+           progress: ProgressSpec = False) -> dict:
+    """Read a detections file into a store at ``out`` (the module docstring), a piece at a time.
+
+    Parameters
+    ----------
+    path : str or Path
+        The detections file: any format of :func:`~sblsim.orchestrator.readers.detections.read_detections`.
+    out : str or Path
+        The store's folder (made; an earlier store there replaced, a file sblsim did not write never).
+    format : str, optional
+        One of :data:`~sblsim.orchestrator.readers.formats.FORMATS`; None: read from the file's first line.
+    piece_bytes : int
+        The bytes read as one piece [bytes] (:data:`PIECE_BYTES`; at least :data:`MIN_PIECE_BYTES`; a piece holds at
+        least one line however long, up to 1 MiB).
+    progress : bool, str or callable
+        :data:`~sblsim.orchestrator.io.progress.ProgressSpec`, in bytes of the file.
+
+    Returns
+    -------
+    dict
+        ``store.json``'s content, with ``seconds`` (the wall time [s]).
+
+    Raises
+    ------
+    ModelError
+        One line: every refusal of :func:`~sblsim.orchestrator.readers.detections.read_detections` but its row and
+        size limits (naming the file's line and column), a disk without the file's size free, a disk that fills.
+    """
+    started = clock.perf_counter()
+    path, out = Path(path), Path(out)
+    if format is not None and format not in FORMATS:
+        raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")
+    if not isinstance(piece_bytes, int) or piece_bytes < MIN_PIECE_BYTES:
+        raise ModelError(f"piece_bytes: {piece_bytes!r} is below {MIN_PIECE_BYTES}; allowed: at least "
+                         f"{MIN_PIECE_BYTES} bytes")
+    refuse_log(path, _WHAT)
+    size = regular_file(path, _WHAT)
+    format = format or sniff_format(path)
+    check_space(path, out, size)
+    with staged_directory(out) as stage, Progress(size, "store", "B", progress) as bar:
+        folder = stage / "detections"
+        try:
+            for encoding in ("utf-8", "latin-1"):
+                shutil.rmtree(folder, ignore_errors=True)
+                folder.mkdir()
+                try:
+                    summary = _write(path, folder, format, encoding, piece_bytes, bar)
+                    break
+                except _NotUtf8:
+                    continue
+            summary["seconds"] = round(clock.perf_counter() - started, 3)
+            (stage / STORE_FILE).write_text(json.dumps(summary, indent=1) + "\n")
+        except OSError as exc:
+            raise ModelError(f"--out: {str(out)!r}: the store could not be written ({exc.strerror or exc}); "
+                             "nothing was kept") from None
+    return summary
+
+
+__all__ = ["ClockParts", "LAYOUT", "MARKER", "MIN_PIECE_BYTES", "PIECE_BYTES", "ROW_GROUP", "STORE_FILE",
+           "check_space", "ingest", "merged_columns", "pieces"]

@@ -1,0 +1,160 @@
+"""A store of detections (:mod:`.ingest`) read back: a tag, some receivers or a time window at a time, or whole as
+the reader's :class:`~sblsim.orchestrator.readers.detections.Detections`.
+
+A store is anyone's folder: its ``store.json`` is read bounded (:data:`MAX_STORE_JSON` bytes) and checked (its marker,
+its layout), no path it names is opened (the Parquet files are the ``part-*.parquet`` files of its ``detections``
+folder, a link among them refused), and the Parquet files are data pyarrow decodes, never code.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.readers import network
+from sblsim.orchestrator.readers.detections import NETWORKS, Detections
+from sblsim.orchestrator.store.ingest import LAYOUT, MARKER, STORE_FILE
+
+#: The largest ``store.json`` read [bytes] (its tags' and receivers' counts: 100,000 tags fit in a few MiB).
+MAX_STORE_JSON = 64 * 2**20
+
+
+class Store:
+    """A store of detections.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The store's folder (``sblsim store DETECTIONS --out FOLDER``).
+
+    Attributes
+    ----------
+    folder : Path
+    info : dict
+        Its ``store.json``: ``source``, ``source_bytes``, ``source_sha256``, ``format``, ``encoding``,
+        ``row_order``, ``rows``, ``time_span_s`` [s since 1970 UTC], ``clock_resets``, ``ignored_columns``, ``tags``
+        and ``receivers`` (each one's detections) (:mod:`.ingest`).
+
+    Raises
+    ------
+    ModelError
+        A folder without a store (no ``store.json`` with its marker), of another layout, or whose files are
+        missing, links, or not Parquet.
+    """
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+        where = f"store: {str(self.folder)!r}"
+        path = self.folder / STORE_FILE
+        if path.is_symlink() or not path.is_file():
+            raise ModelError(f"{where} holds no {STORE_FILE}; allowed: a folder sblsim store wrote")
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_STORE_JSON + 1)
+        if len(data) > MAX_STORE_JSON:
+            raise ModelError(f"{where}: its {STORE_FILE} is larger than {MAX_STORE_JSON // 2**20} MiB")
+        try:
+            info = json.loads(data)
+        except ValueError:
+            info = None
+        if not isinstance(info, dict) or info.get("marker") != MARKER:
+            raise ModelError(f"{where}: its {STORE_FILE} is not a store's description; allowed: a folder sblsim "
+                             "store wrote")
+        if info.get("layout") != LAYOUT:
+            raise ModelError(f"{where}: layout {info.get('layout')!r}; this sblsim reads layout {LAYOUT} (write it "
+                             "again with sblsim store)")
+        self.info = info
+        self.files = sorted((self.folder / "detections").glob("part-*.parquet"))
+        if len(self.files) != info.get("files") or any(f.is_symlink() for f in self.files):
+            raise ModelError(f"{where}: its detections folder holds {len(self.files)} files where {STORE_FILE} says "
+                             f"{info.get('files')!r} (or a link); allowed: the store as sblsim store wrote it")
+
+    @property
+    def tags(self) -> list[str]:
+        """The tags detected (full IDs where the file gives a code space), sorted."""
+        return list(self.info["tags"])
+
+    @property
+    def receivers(self) -> list[str]:
+        """The receivers (serials), sorted."""
+        return list(self.info["receivers"])
+
+    def _filter(self, tags, receivers, start, end):
+        import pyarrow.compute as pc
+
+        parts = []
+        if tags is not None:
+            parts.append(pc.field("tag").isin([str(t) for t in tags]))
+        if receivers is not None:
+            parts.append(pc.field("receiver").isin([str(r) for r in receivers]))
+        if start is not None:
+            parts.append(pc.field("time") >= float(start))
+        if end is not None:
+            parts.append(pc.field("time") < float(end))
+        expression = None
+        for part in parts:
+            expression = part if expression is None else expression & part
+        return expression
+
+    def frame(self, tags: list[str] | None = None, receivers: list[str] | None = None, start: float | None = None,
+              end: float | None = None) -> pd.DataFrame:
+        """The detections of some tags, receivers and a time window, in the reader's order (a receiver's log: the
+        file's; a network extract: each receiver's, its exact duplicates dropped, as
+        :func:`~sblsim.orchestrator.readers.network.ordered` puts it; a duplicate is one tag's, so a tag's rows read
+        alone are those of the whole file).
+
+        Parameters
+        ----------
+        tags, receivers : list of str, optional
+            Only these (None: all).
+        start, end : float, optional
+            Only times in [start, end) [s since 1970 UTC, on the receiver's clock] (None: unbounded).
+
+        Returns
+        -------
+        pandas.DataFrame
+            :attr:`~sblsim.orchestrator.readers.detections.Detections.frame`'s columns (a ``clock_part`` column
+            where the file's receivers' clocks were reset).
+
+        Raises
+        ------
+        ModelError
+            A Parquet file pyarrow cannot read (naming the store).
+        """
+        return self.detections(tags, receivers, start, end).frame
+
+    def detections(self, tags: list[str] | None = None, receivers: list[str] | None = None,
+                   start: float | None = None, end: float | None = None) -> Detections:
+        """:meth:`frame`'s rows as :class:`~sblsim.orchestrator.readers.detections.Detections`, with the exact
+        duplicates dropped among them and the reader's notes (the whole store: what
+        :func:`~sblsim.orchestrator.readers.detections.read_detections` reads from the file, but its ``source``: the
+        file's name)."""
+        import pyarrow as pa
+        import pyarrow.dataset as ds
+        import pyarrow.parquet as pq
+
+        info = self.info
+        try:  # a column only some pieces have (a receiver's note) is in the dataset's schema, empty elsewhere
+            schema = pa.unify_schemas([pq.read_schema(f) for f in self.files])
+            dataset = ds.dataset([str(f) for f in self.files], schema=schema, format="parquet")
+            table = dataset.to_table(filter=self._filter(tags, receivers, start, end))
+        except Exception as exc:  # pyarrow's errors of a damaged file
+            raise ModelError(f"store: {str(self.folder)!r}: its detections cannot be read "
+                             f"({' '.join(str(exc).split())[:160]})") from None
+        frame = table.to_pandas().sort_values("line", kind="stable").reset_index(drop=True)
+        for name in frame.columns:
+            if not pd.api.types.is_numeric_dtype(frame[name]) and frame[name].isna().any():
+                frame[name] = frame[name].fillna("")
+        frame = frame[[c for c in info.get("columns", []) if c in frame] or list(frame.columns)]
+        if not info["clock_resets"] and "clock_part" in frame:
+            frame = frame.drop(columns="clock_part")
+        duplicates, notes = 0, []
+        if info["format"] in NETWORKS:
+            frame, duplicates, notes = network.ordered(frame)
+        return Detections(frame, str(info["source"]), info["format"], list(info["ignored_columns"]),
+                          [dict(r) for r in info["clock_resets"]], info["row_order"], duplicates, notes)
+
+
+__all__ = ["MAX_STORE_JSON", "Store"]
