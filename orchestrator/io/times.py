@@ -92,7 +92,10 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
     """
     import pandas as pd
 
-    text = pd.Series(cells, dtype=object).astype(str).str.strip().reset_index(drop=True)
+    if isinstance(cells, pd.Series) and pd.api.types.is_string_dtype(cells) and not cells.isna().any():
+        text = cells.str.strip().reset_index(drop=True)  # a table's text cells: stripped as they are
+    else:
+        text = pd.Series(cells, dtype=object).astype(str).str.strip().reset_index(drop=True)
     empty = (text == "").to_numpy(bool)
     if empty.any() and not missing:
         k = int(np.flatnonzero(empty)[0])
@@ -109,8 +112,10 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
             k = int(given.index[np.flatnonzero(~iso)[0]])
             allowed = ALLOWED + (" (one form per column)" if given.str.fullmatch(EPOCH.pattern).any() else "")
             raise _refuse(where, lines[k], column, text[k], allowed)
-        normal = given.str.replace(",", ".", regex=False).str.replace(r" ?UTC$", "Z", regex=True)
-        normal = normal.str.replace(r"(?<=[0-9]) (?=[Z+-])", "", regex=True)
+        normal = given
+        if given.str.contains(r",|UTC$|[0-9] [Z+-]", regex=True).any():  # else nothing to replace: no cell's pass
+            normal = given.str.replace(",", ".", regex=False).str.replace(r" ?UTC$", "Z", regex=True)
+            normal = normal.str.replace(r"(?<=[0-9]) (?=[Z+-])", "", regex=True)
         stamps = pd.to_datetime(normal, format="ISO8601", utc=True, errors="coerce")
         bad = stamps.isna().to_numpy(bool)
         if bad.any():

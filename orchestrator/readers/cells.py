@@ -222,9 +222,11 @@ def numbers(values: pd.Series, what: str, name: str, lines: list[int], column: s
     """The cells of one column as floats, each a number (:data:`NUMBER`), finite, in [low, high] (``[low, high)``
     with ``high_open``); empty cells NaN where ``missing``."""
     cells = values.astype(str).str.strip()
+    empty = (cells == "").to_numpy(bool)
+    if missing and empty.all():  # a column left empty (a VUE export's sensor value without sensor tags)
+        return np.full(len(cells), np.nan)
     parsed = np.array(pd.to_numeric(cells.where(cells != "", "nan"), errors="coerce"), float)
     text_ok = cells.str.fullmatch(NUMBER.pattern).fillna(False).to_numpy(bool)
-    empty = (cells == "").to_numpy(bool)
     inside = np.isfinite(parsed) & (parsed >= low) & ((parsed < high) if high_open else (parsed <= high))
     bad = ~((text_ok & inside) | (empty & missing))
     if bad.any():

@@ -27,7 +27,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table, too_large
 from sblsim.orchestrator.readers.sensors import sensor_columns
-from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, split
+from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, before_last_dash
 
 #: Fathom's first line.
 FATHOM_MARK = "VEMCO DATA LOG"
@@ -134,7 +134,7 @@ def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name:
     tag = pattern(body[index["full id"]], TRANSMITTER, what, name, lines, "Full ID",
                   "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
     frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(),
-                          "code_space": [split(t)[0] for t in tag], "time": time})
+                          "code_space": before_last_dash(tag), "time": time})
     if index["sensor value"] is not None:
         frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
             body, index["sensor value"], index["sensor unit"], header, lines, name, what)

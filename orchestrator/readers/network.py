@@ -21,7 +21,14 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.readers.cells import column, pattern, refuse, shown_header, units_row
 from sblsim.orchestrator.readers.sensors import sensor_columns
-from sblsim.orchestrator.readers.transmitters import CODE_SPACE, FULL_ID, TAG_ID, full_ids, split
+from sblsim.orchestrator.readers.transmitters import (
+    CODE_SPACE,
+    FULL_ID,
+    TAG_ID,
+    after_last_dash,
+    before_last_dash,
+    full_ids,
+)
 
 #: A receiver's serial as the exports give it (``VR2W-128355`` keeps ``128355``).
 RECEIVER = re.compile(r"(?:[A-Za-z0-9._]{1,20}-){0,2}[A-Za-z0-9._]{1,40}")
@@ -67,7 +74,7 @@ def extract(header: list[str], body: pd.DataFrame, lines: list[int], name: str, 
     serial, note = annotated(body[index["receiver"]])
     receiver = pattern(serial, RECEIVER, what, name, lines, header[index["receiver"]],
                        "a receiver's serial (or MODEL-SERIAL, e.g. VR2W-128355), a note in brackets after it "
-                       "allowed").str.rpartition("-")[2]
+                       "allowed").pipe(after_last_dash)
     if index["full_id"] is not None and (index["id"] is None or index["space"] is None):
         tag = pattern(body[index["full_id"]], FULL_ID, what, name, lines, header[index["full_id"]],
                       "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
@@ -79,7 +86,7 @@ def extract(header: list[str], body: pd.DataFrame, lines: list[int], name: str, 
                         "a transmitter's id of 1 to 40 letters, digits, '.' or '_'")
         tag = full_ids(space, ident)
     frame = pd.DataFrame({"receiver": receiver.to_numpy(), "tag": tag.to_numpy(),
-                          "code_space": [split(t)[0] for t in tag], "time": time})
+                          "code_space": before_last_dash(tag), "time": time})
     frame["sensor_value"], frame["sensor_unit"] = sensor_columns(body, index["value"], index["unit"], header, lines,
                                                                  name, what)
     if index["station"] is not None:

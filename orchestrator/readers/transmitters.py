@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 from typing import Iterable
 
+import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
@@ -31,6 +32,18 @@ def split(name: str) -> tuple[str, str]:
     """A transmitter's code space (``""`` for none) and id: ``A69-1602-4555`` -> (``A69-1602``, ``4555``)."""
     space, _, ident = name.rpartition("-")
     return space, ident
+
+
+def before_last_dash(cells: pd.Series) -> np.ndarray:
+    """Each cell's text before its last ``-`` (``""`` for none): a transmitter's code space (:func:`split`'s first
+    part), a ``MODEL-SERIAL`` receiver's model; one regular expression over the column (pyarrow's, not a Python
+    call a cell)."""
+    return cells.str.replace(r"-?[^-]*$", "", regex=True).to_numpy()
+
+
+def after_last_dash(cells: pd.Series) -> pd.Series:
+    """Each cell's text after its last ``-`` (the whole cell for none): a ``MODEL-SERIAL`` receiver's serial."""
+    return cells.str.replace(r"^.*-", "", regex=True)
 
 
 def full_ids(space: pd.Series, ident: pd.Series) -> pd.Series:
@@ -58,4 +71,5 @@ def match(given: str, tags: Iterable[str]) -> str | None:
     return found[0] if found else None
 
 
-__all__ = ["CODE_SPACE", "FULL_ID", "TAG_ID", "TRANSMITTER", "full_ids", "match", "split"]
+__all__ = ["CODE_SPACE", "FULL_ID", "TAG_ID", "TRANSMITTER", "after_last_dash", "before_last_dash", "full_ids", "match",
+           "split"]

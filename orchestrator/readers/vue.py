@@ -15,7 +15,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.readers.cells import pattern
 from sblsim.orchestrator.readers.sensors import sensor_columns
-from sblsim.orchestrator.readers.transmitters import TRANSMITTER, split
+from sblsim.orchestrator.readers.transmitters import TRANSMITTER, after_last_dash, before_last_dash
 
 ZONE = re.compile(r"date and time \(utc(?:([+-])([0-9]{2}):?([0-9]{2}))?\)")
 #: The VUE export's columns (lower case) this reader uses; the others of the export are ignored.
@@ -41,14 +41,13 @@ def vue(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what
         seconds = seconds - shift  # local time = UTC + shift
     receiver = pattern(body[index["receiver"]], RECEIVER, what, name, lines, header[index["receiver"]],
                         "a receiver as MODEL-SERIAL, e.g. VR2W-128355")
-    parts = receiver.str.rpartition("-")
     transmitter = pattern(body[index["transmitter"]], TRANSMITTER, what, name, lines, header[index["transmitter"]],
                            "a transmitter as CODESPACE-ID, e.g. A69-1602-59335")
-    frame = pd.DataFrame({"receiver": parts[2].to_numpy(), "tag": transmitter.to_numpy(),
-                          "code_space": [split(t)[0] for t in transmitter], "time": seconds})
+    frame = pd.DataFrame({"receiver": after_last_dash(receiver).to_numpy(), "tag": transmitter.to_numpy(),
+                          "code_space": before_last_dash(transmitter), "time": seconds})
     frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
         body, index["sensor value"], index["sensor unit"], header, lines, name, what)
-    frame["receiver_model"] = parts[0].to_numpy()
+    frame["receiver_model"] = before_last_dash(receiver)
     if index["station name"] is not None:
         frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
     used = {when} | {k for k in index.values() if k is not None}

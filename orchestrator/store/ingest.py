@@ -103,7 +103,7 @@ class ClockParts:
         back = np.flatnonzero(step < -CLOCK_TOLERANCE)
         reset = np.zeros(len(frame), np.int64)
         reset[back] = 1
-        base = np.fromiter((self.part.get(r, 1) for r in receiver), np.int64, len(receiver))
+        base = frame["receiver"].map(self.part).fillna(1).to_numpy(np.int64)
         part = pd.Series(reset).groupby(receiver, sort=False).cumsum().to_numpy() + base
         frame["clock_part"] = part
         self.resets += [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(before_line[k]),
