@@ -44,6 +44,7 @@ from sblsim.orchestrator.commands.design import DesignResult, design
 from sblsim.orchestrator.commands.map import MapResult, accuracy_map
 from sblsim.orchestrator.commands.replay import replay
 from sblsim.orchestrator.commands.run import RunResult, run
+from sblsim.orchestrator.commands.store import StoreResult, store
 from sblsim.orchestrator.commands.sync import SyncResult, sync
 from sblsim.orchestrator.commands.toa import ToaResult, toa
 from sblsim.orchestrator.commands.track import StudyResult, track
@@ -62,7 +63,8 @@ __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign",
     "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult", "DesignResult", "ReplayResult",
-    "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult", "track", "StudyResult",
+    "TrackResult", "TagsResult", "store", "StoreResult", "sync", "SyncResult", "toa", "ToaResult", "track",
+    "StudyResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS",
 ]

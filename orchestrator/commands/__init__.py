@@ -1,5 +1,5 @@
-"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``track``, ``report``, ``sync``, ``toa``,
-``calibrate``, ``compare``, ``budget``, ``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and
+"""The commands a user types, one module each: ``sblsim run``, ``replay``, ``track``, ``report``, ``store``, ``sync``,
+``toa``, ``calibrate``, ``compare``, ``budget``, ``map``, ``design``, ``campaign``, ``ssp``, ``analyze``, ``fmus`` and
 ``codegen``.
 
 A command's module holds what the command is, from Python and from the command line:
@@ -41,6 +41,7 @@ from sblsim.orchestrator.commands import (
     report,
     run,
     ssp,
+    store,
     sync,
     toa,
     track,
@@ -49,5 +50,5 @@ from sblsim.orchestrator.commands import map as accuracy_map
 
 #: The commands, in the order of ``sblsim --help``: name -> module.
 COMMANDS: dict[str, ModuleType] = {module.NAME: module for module in (
-    run, replay, track, report, sync, toa, calibrate, compare, budget, accuracy_map, design, campaign, ssp, analyze,
-    fmus, codegen)}
+    run, replay, track, report, store, sync, toa, calibrate, compare, budget, accuracy_map, design, campaign, ssp,
+    analyze, fmus, codegen)}

@@ -10,7 +10,9 @@ The detections may be given as
   said);
 * **a folder of detection files**: every ``*.csv`` file in it (its sub-folders not looked into), by name; the other
   files are named in a note, not read;
-* **one or more files**.
+* **one or more files**;
+* **a store** (a folder ``sblsim store`` wrote: :mod:`sblsim.orchestrator.store`), read as its file would be but
+  without the file's row and size limits (the detections still held in memory).
 
 Each detection file is read by :func:`~sblsim.orchestrator.readers.detections.read_detections` in its own format
 (``format``, else told from its first line): one receiver's log, or many receivers' in one file. Many files are one
@@ -39,9 +41,10 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers import actel
 from sblsim.orchestrator.readers.cells import named, read_text, text_table
 from sblsim.orchestrator.readers.deployments import Deployments, read_deployments
-from sblsim.orchestrator.readers.detections import LOGGED, SORTED, Detections, read_detections
+from sblsim.orchestrator.readers.detections import LOGGED, SORTED, Detections
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTIONS
 from sblsim.orchestrator.readers.tag_sheet import TagSheet, read_tag_sheet
+from sblsim.orchestrator.store.query import is_store, read_any
 
 #: The most detection files a study reads.
 MAX_FILES = 10_000
@@ -143,7 +146,9 @@ def study_files(detections: Path | Sequence[Path], receivers: Path | None = None
     if len(given) == 1 and given[0].is_dir():
         folder = given[0]
         shown = str(folder)
-        if (folder / actel.DEPLOYMENTS_FILE).is_file():  # actel's workspace
+        if is_store(folder):  # a store of detections (sblsim store): read as one file
+            paths = [folder]
+        elif (folder / actel.DEPLOYMENTS_FILE).is_file():  # actel's workspace
             found = [own for value, own in ((receivers, actel.DEPLOYMENTS_FILE), (spatial, actel.SPATIAL_FILE),
                                             (tags, actel.BIOMETRICS_FILE))
                      if value is None and (folder / own).is_file()]
@@ -168,7 +173,7 @@ def study_files(detections: Path | Sequence[Path], receivers: Path | None = None
     else:
         paths = []
         for path in given:
-            paths.extend(_csv_files(path, notes) if path.is_dir() else [path])
+            paths.extend(_csv_files(path, notes) if path.is_dir() and not is_store(path) else [path])
     if receivers is None:
         raise ModelError("receivers: none given; allowed: the receivers' deployments (--receivers SHEET), or the "
                          f"detections as an actel workspace folder (holding {actel.DEPLOYMENTS_FILE} and "
@@ -268,10 +273,10 @@ def read_many(paths: Sequence[Path], format: str | None = None) -> Detections:
         :data:`~sblsim.orchestrator.readers.limits.MAX_DETECTIONS` rows together.
     """
     if len(paths) == 1:
-        return read_detections(paths[0], format)
+        return read_any(paths[0], format)
     parts, total = [], 0
     for path in paths:
-        part = read_detections(path, format)
+        part = read_any(path, format)
         total += len(part.frame)
         if total > MAX_DETECTIONS:
             raise ModelError(f"detections: {str(path)!r}: the files read up to it hold {total:,} detections; allowed "

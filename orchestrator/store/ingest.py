@@ -37,6 +37,8 @@ from typing import Iterator
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.output import staged_directory
@@ -243,8 +245,6 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
 
 def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
     """Read ``path`` into ``folder`` (the staging folder's ``detections``); returns ``store.json``'s content."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
 
     digest = hashlib.sha256()
     clocks = None if format in NETWORKS else ClockParts(str(path))

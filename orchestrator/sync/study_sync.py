@@ -18,9 +18,10 @@ from sblsim.models.sync.resolution import resolution_warning
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
-from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
+from sblsim.orchestrator.store.query import read_any
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
 
 
@@ -82,7 +83,7 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
         One line: a file refused by its reader, a synchronisation that cannot be made, the table's positions in
         another unit than metres (feet, kilometres, degrees, ...), times rounded too coarsely for the array.
     """
-    data = read_detections(detections, format)
+    data = read_any(detections, format)
     deployments = read_deployments(receivers, crs, frame)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     # the table's positions against the sync tags' clock-free travel times (another unit refused, a table slightly

@@ -43,9 +43,10 @@ from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
-from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.limits import IDENTIFIER
+from sblsim.orchestrator.store.query import read_any
 from sblsim.orchestrator.sync.clocks import Clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.declared import check_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning
@@ -317,7 +318,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     clocks = read_clocks(sync)
     shortest = _shortest(ping_type, interval, sequence)
     deployments = read_deployments(receivers, crs, frame)
-    read = read_detections(detections, format)
+    read = read_any(detections, format)
     array = in_water(read, assign(read, deployments), deployments)  # as the synchronisation took them
     deployments, assigned = array.deployments, array.assigned
     data, table = assigned.detections, assigned.hydrophones

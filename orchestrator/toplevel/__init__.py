@@ -24,7 +24,8 @@ from sblsim.orchestrator.io.version import installed_version as _installed_versi
 __all__ = [
     "load", "run", "compare", "map", "accuracy_map", "budget", "design", "replay", "replay_toa", "replay_toa_tags",
     "calibrate", "campaign", "analyze", "Config", "RunResult", "CompareResult", "MapResult", "BudgetResult",
-    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "sync", "SyncResult", "toa", "ToaResult", "track",
+    "DesignResult", "ReplayResult", "TrackResult", "TagsResult", "store", "StoreResult", "sync", "SyncResult",
+    "toa", "ToaResult", "track",
     "StudyResult",
     "CalibrationResult", "CampaignResult", "AnalysisResult", "SblsimError", "ConfigError", "ENGINES",
     "BUILTIN_SCENARIOS", "__version__",

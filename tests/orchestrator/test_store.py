@@ -116,7 +116,7 @@ def test_a_latin_1_file_is_read_as_the_reader_reads_it(detections, tmp_path):
     path = tmp_path / "latin.csv"
     path.write_bytes(("\n".join(rows) + "\n").encode("latin-1"))
     want = read_detections(path, None)
-    info = ingest(path, tmp_path / "s", piece_bytes=4096)
+    info = ingest(path, tmp_path / "s", piece_bytes=16384)
     assert info["encoding"] == "latin-1"
     pd.testing.assert_frame_equal(Store(tmp_path / "s").detections().frame, want.frame)
 
@@ -130,7 +130,7 @@ def test_a_bad_cell_late_in_the_file_is_the_readers_line_and_nothing_is_written(
     with pytest.raises(ModelError) as whole:
         read_detections(path, None)
     with pytest.raises(ModelError) as pieces:
-        ingest(path, tmp_path / "out" / "s", piece_bytes=4096)
+        ingest(path, tmp_path / "out" / "s", piece_bytes=16384)
     assert str(pieces.value) == str(whole.value) and f"line {k + 1}" in str(whole.value)
     assert not (tmp_path / "out").exists()
 
@@ -142,7 +142,7 @@ def test_a_receiver_sorted_by_tag_is_refused_as_the_reader_refuses_it(detections
     with pytest.raises(ModelError) as whole:
         read_detections(path, None)
     with pytest.raises(ModelError) as pieces:
-        ingest(path, tmp_path / "s", piece_bytes=4096)
+        ingest(path, tmp_path / "s", piece_bytes=16384)
     assert str(pieces.value) == str(whole.value)
 
 
@@ -172,7 +172,7 @@ def test_a_disk_that_fills_leaves_nothing(detections, tmp_path, monkeypatch):
     pq_write = pq.write_table
     monkeypatch.setattr(pq, "write_table", full)
     with pytest.raises(ModelError, match=r"^--out: .*: the store could not be written \(No space left on device\)"):
-        ingest(path, tmp_path / "s", piece_bytes=4096)
+        ingest(path, tmp_path / "s", piece_bytes=16384)
     assert written and not (tmp_path / "s").exists()
     assert [p.name for p in tmp_path.iterdir()] == ["d.csv"]
 
@@ -185,12 +185,49 @@ def test_a_folder_that_is_no_store_is_refused_and_a_foreign_file_kept(detections
     with pytest.raises(ModelError, match="not a store's description"):
         Store(tmp_path / "s")
     with pytest.raises(ModelError):
-        ingest(path, tmp_path / "s", piece_bytes=4096)  # a store.json sblsim did not write is never replaced
+        ingest(path, tmp_path / "s", piece_bytes=16384)  # a store.json sblsim did not write is never replaced
     assert (tmp_path / "s" / "store.json").read_text() == "{}"
-    info = ingest(path, tmp_path / "t", piece_bytes=4096)
+    info = ingest(path, tmp_path / "t", piece_bytes=16384)
     described = json.loads((tmp_path / "t" / "store.json").read_text())
     assert described["rows"] == info["rows"] and described["source"] == "d.csv"
     part = next((tmp_path / "t" / "detections").iterdir())
     part.unlink()
     with pytest.raises(ModelError, match="holds .* files where store.json says"):
         Store(tmp_path / "t")
+
+
+def test_a_store_folder_is_read_as_its_file_by_track_sync_and_toa(detections, tmp_path):
+    from sblsim.orchestrator.readers.study_files import read_many, study_files
+    from sblsim.orchestrator.store.query import read_any
+
+    path = tmp_path / "d.csv"
+    path.write_text(_text(detections, "fathom"))
+    ingest(path, tmp_path / "s")
+    want = read_detections(path, None)
+    pd.testing.assert_frame_equal(read_any(tmp_path / "s").frame, want.frame)
+    files = study_files(tmp_path / "s", receivers=path)
+    assert list(files.detections) == [tmp_path / "s"]  # the store, not its folder's files
+    pd.testing.assert_frame_equal(read_many(files.detections).frame, want.frame)
+    with pytest.raises(ModelError, match=r"^format: 'vue', but the store .* holds 'fathom' detections"):
+        read_any(tmp_path / "s", "vue")
+
+
+def test_the_command_says_what_it_stored_and_refuses_in_one_line(detections, tmp_path, capsys):
+    from sblsim.orchestrator.cli import main
+
+    path = tmp_path / "d.csv"
+    path.write_text(_text(detections, "vue"))
+    assert main(["store", str(path), "--out", str(tmp_path / "s")]) == 0
+    said = capsys.readouterr().out.splitlines()
+    frame = read_detections(path, None).frame
+    assert said[0].startswith(f"store: {len(frame):,} detections of {frame['tag'].nunique()} tags at "
+                              f"{frame['receiver'].nunique()} receivers (vue, ")
+    assert any(line.startswith("note: receiver ") and "part 2" in line for line in said)  # the clock set back
+    before = sorted(p.name for p in (tmp_path / "s").rglob("*"))
+    assert main(["store", str(path), "--out", str(tmp_path / "s")]) == 2  # an earlier store: --force
+    assert "holds an earlier store" in capsys.readouterr().err
+    path.write_text(_text(detections, "vue").replace("VR2AR-", "VR2AR-?", 1))
+    assert main(["store", str(path), "--out", str(tmp_path / "s"), "--force"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sblsim: error: detections: ") and "line 2 column Receiver" in err[0]
+    assert sorted(p.name for p in (tmp_path / "s").rglob("*")) == before  # the earlier store kept whole

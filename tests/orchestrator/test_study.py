@@ -137,6 +137,19 @@ def test_the_same_tracks_from_the_fathom_export(study, tmp_path):
 
 
 @pytest.mark.slow
+def test_the_same_tracks_from_a_store_of_the_export(study, tmp_path):
+    """``sblsim store`` then ``sblsim track STORE``: the study of the file, every track to the bit."""
+    _, files, result, folder = study
+    kept = sblsim.store(files["detections"], out=tmp_path / "store")
+    assert kept.info["rows"] == result.summary["detections"]["rows"]
+    other = sblsim.track(tmp_path / "store", receivers=files["deployments"], tags=files["tags"], workers=1)
+    assert other.summary["detections"]["format"] == "vue"
+    pd.testing.assert_frame_equal(other.tracks, result.tracks, check_exact=True)
+    pd.testing.assert_frame_equal(other.tags.drop(columns="wall_time_s"),
+                                  result.tags.drop(columns="wall_time_s"), check_exact=True)
+
+
+@pytest.mark.slow
 def test_a_tag_never_detected_is_a_row_saying_so(study):
     _, files, _, _ = study
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
