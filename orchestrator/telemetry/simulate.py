@@ -90,8 +90,8 @@ class SimulatedStudy:
 
     def write(self, folder: Path | str, format: str = "vue") -> dict[str, Path]:
         """Write the study's files into ``folder``: ``deployments.csv``, ``tags.csv`` (and each ``pbi`` tag's
-        sequence), and ``detections.csv`` as a VUE export (``vue``) or a Fathom CSV (``fathom``); returns their
-        paths by name."""
+        sequence), and ``detections.csv`` as a VUE export (``vue``), a Fathom CSV (``fathom``) or a GLATOS
+        detection extract (``glatos``); returns their paths by name."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         self.deployments.to_csv(folder / "deployments.csv", index=False, float_format="%.10f")
@@ -99,7 +99,10 @@ class SimulatedStudy:
         for name, values in self.sequences.items():
             pd.DataFrame({"interval_s": values}).to_csv(folder / name, index=False, float_format="%.6f")
         path = folder / "detections.csv"
-        path.write_text(vue_text(self.detections) if format == "vue" else fathom_text(self.detections))
+        writers = {"vue": vue_text, "fathom": fathom_text, "glatos": glatos_text}
+        if format not in writers:
+            raise ValueError(f"format: {format!r} is not one of {', '.join(writers)}")
+        path.write_text(writers[format](self.detections))
         return {"deployments": folder / "deployments.csv", "tags": folder / "tags.csv", "detections": path}
 
 
@@ -112,6 +115,30 @@ def vue_text(detections: pd.DataFrame) -> str:
                           "Sensor Value": "", "Sensor Unit": "", "Station Name": "", "Latitude": "",
                           "Longitude": ""})
     return frame.to_csv(index=False)
+
+
+#: A GLATOS detection extract's columns (the GLATOS data dictionary's, in its order).
+GLATOS_COLUMNS = ("animal_id,detection_timestamp_utc,glatos_array,station_no,transmitter_codespace,transmitter_id,"
+                  "sensor_value,sensor_unit,deploy_lat,deploy_long,receiver_sn,tag_type,tag_model,tag_serial_number,"
+                  "common_name_e,capture_location,length,weight,sex,release_group,release_location,release_latitude,"
+                  "release_longitude,utc_release_date_time,glatos_project_transmitter,glatos_project_receiver,"
+                  "glatos_tag_recovered,glatos_caught_date,station,min_lag").split(",")
+
+
+def glatos_text(detections: pd.DataFrame) -> str:
+    """Detections as a GLATOS detection extract (its 30 columns; a database query's order: by animal, then time; the
+    times ISO 8601 UTC to the microsecond; the animal's and the project's columns filled as an extract has them)."""
+    space, _, ident = detections["transmitter"].str.rpartition("-").T.to_numpy()
+    times = [t.replace("T", " ").rstrip("Z") for t in iso_utc(detections["time"].to_numpy())]
+    frame = pd.DataFrame({name: "" for name in GLATOS_COLUMNS}, index=range(len(detections)))
+    frame = frame.assign(animal_id=["A" + i for i in ident], detection_timestamp_utc=times, glatos_array="SIM",
+                         station_no=detections["serial"].to_numpy(), transmitter_codespace=space,
+                         transmitter_id=ident, deploy_lat="56.0", deploy_long="9.0",
+                         receiver_sn=detections["serial"].to_numpy(), tag_type="pinger", tag_model="V9-2x",
+                         common_name_e="brown trout", glatos_project_transmitter="SIM",
+                         glatos_project_receiver="SIM", station=detections["serial"].to_numpy(), min_lag="NA")
+    order = np.lexsort((detections["time"].to_numpy(), frame["animal_id"].to_numpy()))
+    return frame.iloc[order].to_csv(index=False)
 
 
 def fathom_text(detections: pd.DataFrame) -> str:
@@ -299,4 +326,4 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
                           positions)
 
 
-__all__ = ["SimulatedStudy", "fathom_text", "simulate_study", "vue_text"]
+__all__ = ["SimulatedStudy", "fathom_text", "glatos_text", "simulate_study", "vue_text"]
