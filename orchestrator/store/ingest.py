@@ -152,16 +152,17 @@ def _cut(data: bytes, fathom_file: bool) -> int:
     return end
 
 
-def pieces(handle, name: str, piece_bytes: int, fathom_file: bool) -> Iterator[tuple[bytes, int]]:
-    """The pieces of a file after its first line (:func:`_cut`), each with the number of its first line in the
-    file; each checked as the whole-file reader checks its text (no NUL byte, its lines' lengths and cells).
+def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2) -> Iterator[tuple[bytes, int]]:
+    """The pieces of a file from where ``handle`` stands (after its header; ``line``: the number of the next line),
+    each cut by :func:`_cut`, with the number of its first line in the file; each checked as the whole-file reader
+    checks its text (no NUL byte, its lines' lengths and cells).
 
     Raises
     ------
     ModelError
         A NUL byte, a line longer than 1 MiB or of too many cells, a quoted cell spanning more than a piece.
     """
-    rest, line = b"", 2
+    rest = b""
     while True:
         data = handle.read(piece_bytes)
         ended = not data

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -18,12 +19,50 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.times import MAX_EPOCH, TIME_SPAN
 from sblsim.orchestrator.readers import network
-from sblsim.orchestrator.readers.detections import NETWORKS, Detections, read_detections
+from sblsim.orchestrator.readers.detections import LOGGED, NETWORKS, SORTED, Detections, read_detections
+from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.store.ingest import LAYOUT, MARKER, STORE_FILE
 
 #: The largest ``store.json`` read [bytes] (its tags' and receivers' counts: 100,000 tags fit in a few MiB).
 MAX_STORE_JSON = 64 * 2**20
+
+
+#: ``store.json``'s keys a store is read by, and each one's type.
+_KEYS = {"source": str, "format": str, "row_order": str, "rows": int, "files": int, "columns": list,
+         "ignored_columns": list, "clock_resets": list, "tags": dict, "receivers": dict}
+#: A clock reset's keys (:attr:`~sblsim.orchestrator.readers.detections.Detections.clock_resets`) and their types.
+_RESET = {"receiver": str, "line": int, "previous_line": int, "step_s": float, "before_s": float, "after_s": float,
+          "clock_part": int}
+#: The columns every store's detections hold, and their Arrow types.
+_COLUMNS = {"receiver": "string", "tag": "string", "time": "double", "line": "int64"}
+#: The Arrow types each of :data:`_COLUMNS`' types stands for.
+_TYPES = {"string": ("string", "large_string", "string_view"), "double": ("double",), "int64": ("int64",)}
+
+
+def _check_info(info: dict, where: str) -> None:
+    """Refuse a ``store.json`` whose keys are missing or of another type (a store is anyone's folder).
+
+    Raises
+    ------
+    ModelError
+        One line naming the key and the type allowed.
+    """
+    for key, kind in _KEYS.items():
+        if not isinstance(info.get(key), kind) or isinstance(info.get(key), bool):
+            raise ModelError(f"{where}: its {STORE_FILE}'s {key!r} is {type(info.get(key)).__name__}; allowed: "
+                             f"{kind.__name__} (a store sblsim store wrote)")
+    if info["format"] not in FORMATS or info["row_order"] not in (LOGGED, SORTED):
+        raise ModelError(f"{where}: its {STORE_FILE}'s format {info['format'][:20]!r} or row order is none sblsim "
+                         f"reads; allowed: one of {', '.join(FORMATS)}")
+    texts = [*info["columns"], *info["ignored_columns"], *info["tags"], *info["receivers"]]
+    counts = [*info["tags"].values(), *info["receivers"].values()]
+    resets_ok = all(isinstance(r, dict) and all(isinstance(r.get(k), t) or (t is float and isinstance(r.get(k), int))
+                                                for k, t in _RESET.items()) for r in info["clock_resets"])
+    if not (all(isinstance(t, str) for t in texts) and all(isinstance(n, int) for n in counts) and resets_ok):
+        raise ModelError(f"{where}: its {STORE_FILE}'s columns, tags, receivers or clock resets are not as sblsim "
+                         "store writes them; allowed: a store sblsim store wrote")
 
 
 class Store:
@@ -69,6 +108,7 @@ class Store:
         if info.get("layout") != LAYOUT:
             raise ModelError(f"{where}: layout {info.get('layout')!r}; this sblsim reads layout {LAYOUT} (write it "
                              "again with sblsim store)")
+        _check_info(info, where)
         self.info = info
         self.files = sorted((self.folder / "detections").glob("part-*.parquet"))
         if len(self.files) != info.get("files") or any(f.is_symlink() for f in self.files):
@@ -143,7 +183,19 @@ class Store:
         except Exception as exc:  # pyarrow's errors of a damaged file
             raise ModelError(f"store: {str(self.folder)!r}: its detections cannot be read "
                              f"({' '.join(str(exc).split())[:160]})") from None
+        wrong = [f"{name} ({table.schema.field(name).type if name in table.column_names else 'missing'})"
+                 for name, kind in _COLUMNS.items()
+                 if name not in table.column_names or str(table.schema.field(name).type) not in _TYPES[kind]]
+        if wrong:
+            raise ModelError(f"store: {str(self.folder)!r}: its detections' columns {', '.join(wrong)}; allowed: "
+                             + ", ".join(f"{n} ({k})" for n, k in _COLUMNS.items()))
         frame = table.to_pandas().sort_values("line", kind="stable").reset_index(drop=True)
+        time = frame["time"].to_numpy(float)
+        bad = ~np.isfinite(time) | (time < 0) | (time > MAX_EPOCH)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ModelError(f"store: {str(self.folder)!r}: line {frame['line'].iloc[k]}'s time {float(time[k])!r} s; "
+                             f"allowed: {TIME_SPAN}")
         for name in frame.columns:
             if not pd.api.types.is_numeric_dtype(frame[name]) and frame[name].isna().any():
                 frame[name] = frame[name].fillna("")

@@ -231,3 +231,29 @@ def test_the_command_says_what_it_stored_and_refuses_in_one_line(detections, tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("sblsim: error: detections: ") and "line 2 column Receiver" in err[0]
     assert sorted(p.name for p in (tmp_path / "s").rglob("*")) == before  # the earlier store kept whole
+
+
+def test_a_store_from_a_stranger_is_checked_before_its_detections_are_used(detections, tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = tmp_path / "d.csv"
+    path.write_text(_text(detections, "vue"))
+    ingest(path, tmp_path / "s")
+    described = json.loads((tmp_path / "s" / "store.json").read_text())
+    for key, value in (("rows", "many"), ("clock_resets", [{"receiver": 1}]), ("format", "xls"), ("tags", [])):
+        (tmp_path / "s" / "store.json").write_text(json.dumps(described | {key: value}))
+        with pytest.raises(ModelError, match=r"^store: .*store.json's"):
+            Store(tmp_path / "s")
+    (tmp_path / "s" / "store.json").write_text(json.dumps(described))
+    part = next((tmp_path / "s" / "detections").iterdir())
+    table = pq.read_table(part)
+    pq.write_table(table.set_column(table.column_names.index("time"), "time",
+                                    pa.array([str(t) for t in table.column("time").to_pylist()])), part)
+    with pytest.raises(ModelError, match=r"its detections' columns time \(string\); allowed: .*time \(double\)"):
+        Store(tmp_path / "s").frame()
+    times = table.column("time").to_numpy().copy()
+    times[3] = -1.0
+    pq.write_table(table.set_column(table.column_names.index("time"), "time", pa.array(times)), part)
+    with pytest.raises(ModelError, match=r"line \d+'s time -1.0 s; allowed: a time from 1970"):
+        Store(tmp_path / "s").frame()
