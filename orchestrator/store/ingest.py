@@ -246,7 +246,6 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
 
 def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
     """Read ``path`` into ``folder`` (the staging folder's ``detections``); returns ``store.json``'s content."""
-
     digest = hashlib.sha256()
     clocks = None if format in NETWORKS else ClockParts(str(path))
     tags: Counter = Counter()

@@ -126,7 +126,7 @@ class Store:
         return list(self.info["receivers"])
 
     def _filter(self, tags, receivers, start, end):
-
+        """The Arrow expression selecting ``tags``, ``receivers`` and [start, end) (None: all)."""
         parts = []
         if tags is not None:
             parts.append(pc.field("tag").isin([str(t) for t in tags]))
@@ -174,7 +174,6 @@ class Store:
         duplicates dropped among them and the reader's notes (the whole store: what
         :func:`~sblsim.orchestrator.readers.detections.read_detections` reads from the file, but its ``source``: the
         file's name)."""
-
         info = self.info
         try:  # a column only some pieces have (a receiver's note) is in the dataset's schema, empty elsewhere
             schema = pa.unify_schemas([pq.read_schema(f) for f in self.files])
