@@ -39,7 +39,15 @@ TARGET_PEAK_GIB = 1.0
 
 
 def _peak_gib() -> float:
-    """This process's peak resident memory [GiB] (Linux: ru_maxrss in KiB)."""
+    """This process's peak resident memory [GiB]: Linux's ``VmHWM`` (its own memory's high-water mark: ru_maxrss
+    would carry the parent's, kept across fork and exec), else ru_maxrss [KiB]."""
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 2**20
+    except OSError:
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 import shutil
 import time as clock
 from collections import Counter
@@ -52,9 +51,9 @@ from sblsim.orchestrator.readers.detections import CLOCK_TOLERANCE, LOGGED, NETW
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 
-#: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: about 0.3 GiB of
-#: text cells for a VUE export's 16 MiB).
-PIECE_BYTES = 16 * 2**20
+#: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: reading a VUE export, a
+#: Fathom CSV or a GLATOS extract peaked at 0.31-0.33 GiB with it, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
+PIECE_BYTES = 8 * 2**20
 #: The smallest piece allowed [bytes].
 MIN_PIECE_BYTES = 4096
 #: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
@@ -67,7 +66,6 @@ LAYOUT = 1
 #: Each format's reader (:func:`~sblsim.orchestrator.readers.detections.read_detections`'s).
 READERS = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos, "otn": otn.otn,
            "actel": actel.actel, "thelma": thelma.thelma}
-_DESC = {record: re.compile(rf'^"?{record}_DESC"?,[^\n]*', re.M) for record in fathom.FATHOM_RECORDS}
 _WHAT = "detections"
 
 
@@ -194,15 +192,29 @@ def _decoded(data: bytes, encoding: str) -> str:
         raise _NotUtf8() from None
 
 
+def _last_line(text: str, starts: tuple[str, ...]) -> str | None:
+    """The last line of ``text`` starting with one of ``starts`` (its line end dropped), None where none does."""
+    best = -1
+    for start in starts:
+        at = text.rfind(start)
+        while at > 0 and text[at - 1] != "\n":
+            at = text.rfind(start, 0, at)
+        best = max(best, at)
+    if best < 0:
+        return None
+    end = text.find("\n", best)
+    return text[best:end if end >= 0 else len(text)].rstrip("\r")
+
+
 def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: str
                   ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
     """A Fathom piece's ``DET`` (and ``DET_SENS``) tables under the ``_DESC`` lines in force (``descs``, updated
     from the piece), their rows numbered by the file's lines; None where no ``DET_DESC`` has come yet."""
     carried = [descs[record] for record in fathom.FATHOM_RECORDS if record in descs]
-    for record, desc in _DESC.items():
-        found = list(desc.finditer(text))
-        if found:
-            descs[record] = found[-1].group(0).rstrip("\r")
+    for record in fathom.FATHOM_RECORDS:
+        found = _last_line(text, (f"{record}_DESC,", f'"{record}_DESC",'))
+        if found is not None:
+            descs[record] = found
     if "DET" not in descs:
         return None
     shift = line - (2 + len(carried))  # the piece's first line follows Fathom's first line and the carried lines
