@@ -31,12 +31,13 @@ _CSV = dict(header=None, dtype=str, keep_default_na=False, na_filter=False, skip
             quotechar='"', on_bad_lines="error")
 
 
-def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int) -> ModelError:
-    return ModelError(f"{what}: {name!r} {amount}; allowed at most {max_bytes // 2**20} MiB and {rows:,} rows")
+def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int, hint: str = "") -> ModelError:
+    return ModelError(f"{what}: {name!r} {amount}; allowed at most {max_bytes // 2**20} MiB and {rows:,} rows{hint}")
 
 
 def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None, *,
-              max_cells: int | None = None, max_line_cells: int | None = None, fallback: str | None = None) -> str:
+              max_cells: int | None = None, max_line_cells: int | None = None, fallback: str | None = None,
+              hint: str = "") -> str:
     """A regular file's text, refused before it is read whole when it is larger than ``max_bytes`` or holds more
     than ``max_rows`` lines and 1,000 besides, and before it is decoded when a line is longer than
     :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or holds more than ``max_line_cells`` cells (its commas and
@@ -57,6 +58,8 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
     fallback : str, optional
         The encoding a text that is not UTF-8 is read in (one that decodes every byte, ``"latin-1"``); default
         none: such a text refused.
+    hint : str
+        Said after the refusal of a file too large (what to do with a larger one).
 
     Raises
     ------
@@ -78,7 +81,7 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else \
             _decoded(head, name, what, fallback)
     data = read_bounded(path, what, max_bytes, max_rows + 1000,
-                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows),
+                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows, hint),
                         max_line_cells=max_line_cells, max_cells=max_cells)
     nul = data.find(b"\0")
     if nul >= 0:

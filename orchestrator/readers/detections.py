@@ -69,6 +69,8 @@ from sblsim.orchestrator.readers.transmitters import match
 CLOCK_TOLERANCE = 1e-3
 #: The most resets (times going back in the file's order) one receiver may have; more: rows not in its order.
 MAX_CLOCK_RESETS = 20
+#: What a refusal of a detections file too large to read whole says to do.
+LARGER = " read whole (a larger file: sblsim store FILE --out DIR, then DIR in the file's place)"
 #: The formats that are a network's extract (a database query, sorted by animal then time), not a receiver's log.
 NETWORKS = ("glatos", "otn")
 #: The orders of :attr:`Detections.row_order`: a receiver's own log (VUE, Fathom, YAPS) as logged, its clock judged in
@@ -205,7 +207,7 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     name = str(path)
     # a Windows export in Latin-1 (VUE writes a temperature tag's unit as °C in it) read, not refused
     text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS,
-                     fallback="latin-1")
+                     fallback="latin-1", hint=LARGER)
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
     if format == "fathom":

@@ -257,3 +257,18 @@ def test_a_store_from_a_stranger_is_checked_before_its_detections_are_used(detec
     pq.write_table(table.set_column(table.column_names.index("time"), "time", pa.array(times)), part)
     with pytest.raises(ModelError, match=r"line \d+'s time -1.0 s; allowed: a time from 1970"):
         Store(tmp_path / "s").frame()
+
+
+def test_a_file_too_large_to_read_whole_says_so_and_is_read_from_its_store(detections, tmp_path, monkeypatch):
+    from sblsim.orchestrator.readers import detections as reader
+    from sblsim.orchestrator.store.query import read_any
+
+    path = tmp_path / "d.csv"
+    path.write_text(_text(detections, "vue"))
+    want = read_detections(path, None).frame
+    monkeypatch.setattr(reader, "MAX_DETECTION_BYTES", 2**14)  # the file is beyond the whole-file reader
+    said = r"MiB; allowed at most 0 MiB and 3,000,000 rows read whole \(a larger file: sblsim store FILE --out DIR, "
+    with pytest.raises(ModelError, match=said + r"then DIR in the file's place\)$"):
+        read_detections(path, None)
+    ingest(path, tmp_path / "s", piece_bytes=16384)
+    pd.testing.assert_frame_equal(read_any(tmp_path / "s").frame, want)
