@@ -182,7 +182,7 @@ HELP = "synchronise the receivers' clocks of a telemetry array from its sync tag
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim sync``'s arguments."""
     p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial), a VUE export, "
-                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract")
+                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract, or a store (sblsim store)")
     add_receivers(p)
     p.add_argument("--format", choices=FORMATS, default=None,
                    help="the detections' format (default: read from the file's first line)")

@@ -130,7 +130,7 @@ HELP = "one tag's times-of-arrival matrix from raw detections and a synchronisat
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim toa``'s arguments."""
     p.add_argument("detections", type=Path, help="raw detections: a YAPS table (epo,frac,tag,serial), a VUE export, "
-                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract")
+                   "a Fathom (VDAT) CSV, a GLATOS or an OTN detection extract, or a store (sblsim store)")
     add_receivers(p)
     p.add_argument("--sync", type=Path, required=True, metavar="DIR",
                    help="the synchronisation's folder (sblsim sync --out DIR): its offsets.csv")

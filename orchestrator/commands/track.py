@@ -215,8 +215,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim track``'s arguments."""
     p.add_argument("detections", type=Path, nargs="+", metavar="DETECTIONS",
                    help="the receivers' detections: files (a YAPS table, a VUE export, a Fathom (VDAT) CSV, a GLATOS "
-                        "or an OTN detection extract, actel's detections, a Thelma TBR export), a folder of them, or "
-                        "an actel workspace folder (deployments.csv, spatial.csv, biometrics.csv, detections/)")
+                        "or an OTN extract, actel's detections, a Thelma TBR export), a folder of them, an actel "
+                        "workspace (deployments.csv, spatial.csv, biometrics.csv, detections/), or a store (sblsim store)")
     add_receivers(p, required=False)
     p.add_argument("--spatial", type=Path, default=None, metavar="CSV",
                    help="actel's stations (Station.name, Latitude, Longitude, Type) for actel's deployments (Receiver, "
