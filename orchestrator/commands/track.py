@@ -214,9 +214,9 @@ HELP = "track every tag of a telemetry study: deployments, detection exports and
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sblsim track``'s arguments."""
     p.add_argument("detections", type=Path, nargs="+", metavar="DETECTIONS",
-                   help="the receivers' detections: files (a YAPS table, a VUE export, a Fathom (VDAT) CSV, a GLATOS "
-                        "or an OTN extract, actel's detections, a Thelma TBR export), a folder of them, an actel "
-                        "workspace (deployments.csv, spatial.csv, biometrics.csv, detections/), or a store (sblsim store)")
+                   help="the receivers' detections: files (a YAPS table, a VUE export, a Fathom CSV, a GLATOS or "
+                        "an OTN extract, actel's detections, a Thelma export), a folder of them, an actel workspace "
+                        "(deployments.csv, spatial.csv, biometrics.csv, detections/) or a store (sblsim store)")
     add_receivers(p, required=False)
     p.add_argument("--spatial", type=Path, default=None, metavar="CSV",
                    help="actel's stations (Station.name, Latitude, Longitude, Type) for actel's deployments (Receiver, "
