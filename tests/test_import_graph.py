@@ -24,7 +24,10 @@ MAY_IMPORT = {"sblsim.models": set(), "sblsim.fmus": {"sblsim.models"},
 #: ``import sblsim`` must not load): a function-level import is allowed where it defers one of these, directly or
 #: through the sblsim module it imports.
 HEAVY = ("matplotlib", "statsmodels", "dask", "distributed", "fmpy", "pyarrow", "pandas", "scipy.stats", "pyDOE3",
-         "casadi", "scipy.integrate", "scipy.optimize", "pyproj", "mpl_toolkits", "openpyxl", "xlrd")
+         "casadi", "scipy.integrate", "scipy.optimize", "pyproj", "mpl_toolkits", "openpyxl", "xlrd",
+         # pyarrow's dataset and Parquet: a gigabyte of address space reserved at import (pyarrow and pandas: a third
+         # of one), which a reader under a memory limit runs out of (tests/orchestrator/test_reader_memory.py)
+         "pyarrow.dataset", "pyarrow.parquet")
 #: Function-level imports that defer nothing heavy but ask whether an optional package is installed.
 PROBES = {"ziglang"}
 

@@ -16,9 +16,7 @@ from sblsim.orchestrator.io.arguments import path_argument, prepare_out, text_ar
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.readers.formats import FORMATS
-
-#: The file that marks a store's folder (:data:`sblsim.orchestrator.store.ingest.STORE_FILE`).
-MARKER = "store.json"
+from sblsim.orchestrator.store.layout import STORE_FILE
 
 
 @dataclass
@@ -76,7 +74,7 @@ def store(detections: str | Path, *, out: str | Path, format: str | None = None,
     if format is not None:
         format = text_argument(format, "format")
     check_progress(progress)
-    target = prepare_out(path_argument(out, "out", optional=False), force, MARKER, "store")
+    target = prepare_out(path_argument(out, "out", optional=False), force, STORE_FILE, "store")
     return StoreResult(ingest(detections, target, format, progress=progress), target)
 
 
@@ -115,7 +113,7 @@ def main(args: argparse.Namespace) -> int:
     from sblsim.orchestrator.store.ingest import ingest
 
     out = output_folder(args.out, Path("results") / f"store_{folder_name(args.detections.stem)}", args.force,
-                        MARKER, "store")
+                        STORE_FILE, "store")
     info = ingest(args.detections, out, args.format, progress="auto")
     for line in lines(info, out):
         print(line)

@@ -44,7 +44,7 @@ from sblsim.orchestrator.readers.deployments import Deployments, read_deployment
 from sblsim.orchestrator.readers.detections import LOGGED, SORTED, Detections
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTIONS
 from sblsim.orchestrator.readers.tag_sheet import TagSheet, read_tag_sheet
-from sblsim.orchestrator.store.query import is_store, read_any
+from sblsim.orchestrator.store.read import is_store, read_any
 
 #: The most detection files a study reads.
 MAX_FILES = 10_000

@@ -50,6 +50,7 @@ from sblsim.orchestrator.readers.cells import text_table
 from sblsim.orchestrator.readers.detections import CLOCK_TOLERANCE, LOGGED, NETWORKS, SORTED, check_parts, sniff_format
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
+from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
 
 #: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: reading a VUE export, a
 #: Fathom CSV or a GLATOS extract peaked at 0.31-0.33 GiB with it, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
@@ -58,11 +59,6 @@ PIECE_BYTES = 8 * 2**20
 MIN_PIECE_BYTES = 4096
 #: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
 ROW_GROUP = 65536
-#: The store's description, written last, and the value of its ``marker`` key.
-STORE_FILE = "store.json"
-MARKER = "sblsim detections store"
-#: The layout's version (``store.json``'s ``layout``).
-LAYOUT = 1
 #: Each format's reader (:func:`~sblsim.orchestrator.readers.detections.read_detections`'s).
 READERS = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos, "otn": otn.otn,
            "actel": actel.actel, "thelma": thelma.thelma}
@@ -375,5 +371,5 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
     return summary
 
 
-__all__ = ["ClockParts", "LAYOUT", "MARKER", "MIN_PIECE_BYTES", "PIECE_BYTES", "ROW_GROUP", "STORE_FILE",
+__all__ = ["ClockParts", "MIN_PIECE_BYTES", "PIECE_BYTES", "ROW_GROUP",
            "check_space", "ingest", "merged_columns", "pieces"]

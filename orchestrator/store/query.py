@@ -21,9 +21,9 @@ import pyarrow.parquet as pq
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import MAX_EPOCH, TIME_SPAN
 from sblsim.orchestrator.readers import network
-from sblsim.orchestrator.readers.detections import LOGGED, NETWORKS, SORTED, Detections, read_detections
+from sblsim.orchestrator.readers.detections import LOGGED, NETWORKS, SORTED, Detections
 from sblsim.orchestrator.readers.formats import FORMATS
-from sblsim.orchestrator.store.ingest import LAYOUT, MARKER, STORE_FILE
+from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
 
 #: The largest ``store.json`` read [bytes] (its tags' and receivers' counts: 100,000 tags fit in a few MiB).
 MAX_STORE_JSON = 64 * 2**20
@@ -208,32 +208,4 @@ class Store:
                           [dict(r) for r in info["clock_resets"]], info["row_order"], duplicates, notes)
 
 
-def is_store(path: str | Path) -> bool:
-    """Whether ``path`` is a folder holding a ``store.json`` (a store, or a folder claiming to be one: :class:`Store`
-    then checks it)."""
-    path = Path(path)
-    return path.is_dir() and (path / STORE_FILE).is_file()
-
-
-def read_any(path: str | Path, format: str | None = None) -> Detections:
-    """A detections file read whole (:func:`~sblsim.orchestrator.readers.detections.read_detections`, within its
-    limits), or a store's detections (:meth:`Store.detections`: no row limit but memory), as one table.
-
-    Raises
-    ------
-    ModelError
-        The reader's refusals; a store that is none (:class:`Store`), or whose format is not ``format``.
-    """
-    if not is_store(path):
-        return read_detections(path, format)
-    store = Store(path)
-    held = store.info.get("format")
-    if format is not None and format != held:
-        raise ModelError(f"format: {format!r}, but the store {str(path)!r} holds {held!r} detections (read from "
-                         f"{store.info.get('source')!r}); allowed: {held!r} or none")
-    detections = store.detections()
-    detections.source = f"{path} (the store of {store.info.get('source')})"
-    return detections
-
-
-__all__ = ["MAX_STORE_JSON", "Store", "is_store", "read_any"]
+__all__ = ["MAX_STORE_JSON", "Store"]

@@ -21,7 +21,7 @@ from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
-from sblsim.orchestrator.store.query import read_any
+from sblsim.orchestrator.store.read import read_any
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
 
 

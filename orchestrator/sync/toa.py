@@ -46,7 +46,7 @@ from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.limits import IDENTIFIER
-from sblsim.orchestrator.store.query import read_any
+from sblsim.orchestrator.store.read import read_any
 from sblsim.orchestrator.sync.clocks import Clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.declared import check_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning

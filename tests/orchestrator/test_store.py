@@ -198,7 +198,7 @@ def test_a_folder_that_is_no_store_is_refused_and_a_foreign_file_kept(detections
 
 def test_a_store_folder_is_read_as_its_file_by_track_sync_and_toa(detections, tmp_path):
     from sblsim.orchestrator.readers.study_files import read_many, study_files
-    from sblsim.orchestrator.store.query import read_any
+    from sblsim.orchestrator.store.read import read_any
 
     path = tmp_path / "d.csv"
     path.write_text(_text(detections, "fathom"))
@@ -261,7 +261,7 @@ def test_a_store_from_a_stranger_is_checked_before_its_detections_are_used(detec
 
 def test_a_file_too_large_to_read_whole_says_so_and_is_read_from_its_store(detections, tmp_path, monkeypatch):
     from sblsim.orchestrator.readers import detections as reader
-    from sblsim.orchestrator.store.query import read_any
+    from sblsim.orchestrator.store.read import read_any
 
     path = tmp_path / "d.csv"
     path.write_text(_text(detections, "vue"))

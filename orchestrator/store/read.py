@@ -1,0 +1,44 @@
+"""A study's detections as a command takes them: a file read whole, or a store's folder (:mod:`.query`), told apart
+by the folder's ``store.json``. Light: pyarrow's dataset and Parquet modules (about a gigabyte of address space
+reserved at import) are loaded only where a store is read."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.store.layout import STORE_FILE
+
+
+def is_store(path: str | Path) -> bool:
+    """Whether ``path`` is a folder holding a ``store.json`` (a store, or a folder claiming to be one:
+    :class:`~.query.Store` then checks it)."""
+    path = Path(path)
+    return path.is_dir() and (path / STORE_FILE).is_file()
+
+
+def read_any(path: str | Path, format: str | None = None) -> Detections:
+    """A detections file read whole (:func:`~sblsim.orchestrator.readers.detections.read_detections`, within its
+    limits), or a store's detections (:meth:`~.query.Store.detections`: no row limit but memory), as one table.
+
+    Raises
+    ------
+    ModelError
+        The reader's refusals; a store that is none (:class:`~.query.Store`), or whose format is not ``format``.
+    """
+    if not is_store(path):
+        return read_detections(path, format)
+    from sblsim.orchestrator.store.query import Store  # pyarrow's dataset and Parquet: a gigabyte of address space
+
+    store = Store(path)
+    held = store.info.get("format")
+    if format is not None and format != held:
+        raise ModelError(f"format: {format!r}, but the store {str(path)!r} holds {held!r} detections (read from "
+                         f"{store.info.get('source')!r}); allowed: {held!r} or none")
+    detections = store.detections()
+    detections.source = f"{path} (the store of {store.info.get('source')})"
+    return detections
+
+
+__all__ = ["is_store", "read_any"]
