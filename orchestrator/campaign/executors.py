@@ -141,6 +141,10 @@ def close_client(client) -> None:
     their chunks dropped for ``--resume`` to recompute, instead of Dask's nanny waiting 4 s for a chunk's compiled
     code before it kills them)."""
     cluster = getattr(client, "cluster_owned", None)
+    if stop.pending() is not None:  # the command ends on a signal: the comms its closing breaks are not said (a
+        # scheduler logs each, with a traceback, once the cluster's own silence has ended), nor anything after
+        for name in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
     if cluster is not None and stop.pending() is not None:
         for nanny in list(getattr(cluster, "workers", {}).values()):
             pid = getattr(nanny, "pid", None)
