@@ -217,12 +217,7 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     del text
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no detections")
-    reader = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos,
-              "otn": otn.otn, "actel": actel.actel, "thelma": thelma.thelma}[format]
-    frame, used = reader(header, body, lines, name, what)
-    if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
-        frame["line"] = np.asarray(lines, np.int64)
-    frame = frame.reset_index(drop=True)
+    frame, used = rows_read(format, header, body, lines, name, what)
     if format in NETWORKS:  # a database query's order (by animal, then time), not a receiver's: no clock judged
         frame, duplicates, notes = network.ordered(frame)
         resets, order = [], SORTED
@@ -230,6 +225,28 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
         resets, order, duplicates, notes = clock_parts(frame, name, what), LOGGED, 0, []
     ignored = [h for k, h in enumerate(header) if k not in used and h]
     return Detections(frame, name, format, ignored, resets, order, duplicates, notes)
+
+
+#: Each format's reader of a table's text rows into detections.
+READERS = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos, "otn": otn.otn,
+           "actel": actel.actel, "thelma": thelma.thelma}
+
+
+def rows_read(format: str, header: list[str], body: pd.DataFrame, lines: list[int], name: str, what: str
+              ) -> tuple[pd.DataFrame, set[int]]:
+    """A table's text rows (a file's, or a piece's: :mod:`sblsim.orchestrator.store.ingest`) read by ``format``'s
+    reader (:data:`READERS`) into detections in the rows' order, each with its ``line`` in the file, the index from 0;
+    and the header's columns used.
+
+    Raises
+    ------
+    ModelError
+        The reader's refusals (one line naming the file, its line and column).
+    """
+    frame, used = READERS[format](header, body, lines, name, what)
+    if "line" not in frame:  # a reader that adds rows of its own (Fathom's sensor records) gives their lines
+        frame["line"] = np.asarray(lines, np.int64)
+    return frame.reset_index(drop=True), used
 
 
 def clock_parts(frame: pd.DataFrame, name: str, what: str) -> list[dict]:
@@ -300,4 +317,5 @@ def reset_line(reset: dict) -> str:
 
 
 __all__ = ["CLOCK_TOLERANCE", "Detections", "FORMATS", "LOGGED", "MAX_CLOCK_RESETS", "NETWORKS", "SORTED",
-           "check_parts", "clock_parts", "format_of", "read_detections", "reset_line", "sniff_format"]
+           "READERS", "check_parts", "clock_parts", "format_of", "read_detections", "reset_line", "rows_read",
+           "sniff_format"]

@@ -44,10 +44,18 @@ from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, check_cells, regular_file
 from sblsim.orchestrator.io.version import installed_version
-from sblsim.orchestrator.readers import actel, fathom, glatos, otn, thelma, vue, yaps
+from sblsim.orchestrator.readers import fathom
 from sblsim.orchestrator.readers.binary import not_text, refuse_log
 from sblsim.orchestrator.readers.cells import text_table
-from sblsim.orchestrator.readers.detections import CLOCK_TOLERANCE, LOGGED, NETWORKS, SORTED, check_parts, sniff_format
+from sblsim.orchestrator.readers.detections import (
+    CLOCK_TOLERANCE,
+    LOGGED,
+    NETWORKS,
+    SORTED,
+    check_parts,
+    rows_read,
+    sniff_format,
+)
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
@@ -59,9 +67,6 @@ PIECE_BYTES = 8 * 2**20
 MIN_PIECE_BYTES = 4096
 #: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
 ROW_GROUP = 65536
-#: Each format's reader (:func:`~sblsim.orchestrator.readers.detections.read_detections`'s).
-READERS = {"yaps": yaps.yaps, "vue": vue.vue, "fathom": fathom.fathom, "glatos": glatos.glatos, "otn": otn.otn,
-           "actel": actel.actel, "thelma": thelma.thelma}
 _WHAT = "detections"
 
 
@@ -246,10 +251,8 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
                                                  max_cells=MAX_DETECTION_CELLS)
             if not len(body):
                 continue
-            frame, used = READERS[format](header, body, lines, name, _WHAT)
-            if "line" not in frame:
-                frame["line"] = np.asarray(lines, np.int64)
-            yield frame.reset_index(drop=True), header, used
+            frame, used = rows_read(format, header, body, lines, name, _WHAT)
+            yield frame, header, used
 
 
 def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
