@@ -111,6 +111,7 @@ class Store:
         _check_info(info, where)
         self.info = info
         self.files = sorted((self.folder / "detections").glob("part-*.parquet"))
+        self._dataset = None
         if len(self.files) != info.get("files") or any(f.is_symlink() for f in self.files):
             raise ModelError(f"{where}: its detections folder holds {len(self.files)} files where {STORE_FILE} says "
                              f"{info.get('files')!r} (or a link); allowed: the store as sblsim store wrote it")
@@ -176,9 +177,10 @@ class Store:
         file's name)."""
         info = self.info
         try:  # a column only some pieces have (a receiver's note) is in the dataset's schema, empty elsewhere
-            schema = pa.unify_schemas([pq.read_schema(f) for f in self.files])
-            dataset = ds.dataset([str(f) for f in self.files], schema=schema, format="parquet")
-            table = dataset.to_table(filter=self._filter(tags, receivers, start, end))
+            if self._dataset is None:  # every file's footer read once, not at each tag's query
+                schema = pa.unify_schemas([pq.read_schema(f) for f in self.files])
+                self._dataset = ds.dataset([str(f) for f in self.files], schema=schema, format="parquet")
+            table = self._dataset.to_table(filter=self._filter(tags, receivers, start, end))
         except Exception as exc:  # pyarrow's errors of a damaged file
             raise ModelError(f"store: {str(self.folder)!r}: its detections cannot be read "
                              f"({' '.join(str(exc).split())[:160]})") from None
