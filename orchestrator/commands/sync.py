@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sblsim.models.sync.windows import WINDOW_DAYS
 from sblsim.orchestrator.commands.console import add_receivers, add_refinement, output_folder
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
@@ -28,6 +29,8 @@ if TYPE_CHECKING:  # the heavy modules are imported when a function runs
 #: The formats of the detections file (None: read from its first line), the bins' allowed width [h] and the sound
 #: speed's range [m/s].
 BIN_HOURS = (0.05, 168.0)
+#: The windows' length [days] allowed (0: one fit; the default :data:`~sblsim.models.sync.windows.WINDOW_DAYS`).
+WINDOW_DAYS_RANGE = (0.0, 366.0)
 SOUND_SPEED = (1300.0, 1700.0)
 
 
@@ -100,7 +103,7 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
          sound_speed: float | None = None, sound_speed_file: str | Path | None = None, bin_hours: float = 1.0,
          reference: str | None = None, out: str | Path | None = None, force: bool = False,
          refine_positions: bool = False, survey_sigma: float | None = None, crs: str | None = None,
-         frame: str | None = None) -> SyncResult:
+         frame: str | None = None, window_days: float = WINDOW_DAYS) -> SyncResult:
     """Synchronise the receivers' clocks from the sync tags: ``sblsim sync``.
 
     Parameters
@@ -136,6 +139,9 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         The receivers' CRS (``EPSG:…``; WGS 84 for ``lat``, ``lon`` by default).
     frame : str, optional
         The metric frame (a projected CRS in metres; default the UTM zone of the array's centre).
+    window_days : float
+        [days] in [0, 366]: a season longer than a window (and its overlaps) fitted window by window
+        (:mod:`sblsim.models.sync.windows`); 0: one fit however long.
 
     Returns
     -------
@@ -162,11 +168,12 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
     flag_argument(force, "force")
     flag_argument(refine_positions, "refine_positions")
     survey_sigma = survey_sigma_argument(survey_sigma, refine_positions, "survey_sigma")
+    window_days = real_argument(window_days, "window_days", *WINDOW_DAYS_RANGE, "days")
     target = prepare_out(out, force, "sync.json", "synchronisation")
     from sblsim.orchestrator.sync.study_sync import synchronise_files
 
     outcome = synchronise_files(detections, receivers, format, sound_speed, sound_speed_file, bin_hours, reference,
-                                refine_positions, survey_sigma, crs, frame)
+                                refine_positions, survey_sigma, crs, frame, window_days)
     if target is not None:
         from sblsim.orchestrator.sync.outputs import write
 
@@ -196,6 +203,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reference", default=None, metavar="SERIAL",
                    help="the reference receiver (default: the one with the most arrivals shared with others)")
     add_refinement(p, "with the clocks")
+    p.add_argument("--window-days", type=float, default=WINDOW_DAYS, metavar="D",
+                   help=f"a season fitted in windows of D days [0, 366] (default {WINDOW_DAYS:g}; 0: one fit)")
     p.add_argument("--out", type=Path, default=None, help="output directory (default results/sync_DETECTIONS)")
     p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
 
@@ -206,11 +215,12 @@ def main(args: argparse.Namespace) -> int:
                                                                 "m/s")
     hours = real_argument(args.bin_hours, "--bin-hours", *BIN_HOURS, "h")
     survey = survey_sigma_argument(args.survey_sigma, args.refine_positions, "--survey-sigma")
+    window = real_argument(args.window_days, "--window-days", *WINDOW_DAYS_RANGE, "days")
     from sblsim.orchestrator.sync.outputs import write
     from sblsim.orchestrator.sync.study_sync import synchronise_files
 
     outcome = synchronise_files(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
-                                args.reference, args.refine_positions, survey, args.crs, args.frame)
+                                args.reference, args.refine_positions, survey, args.crs, args.frame, window)
     out = output_folder(args.out, Path("results") / f"sync_{folder_name(args.detections.stem)}", args.force,
                         "sync.json", "synchronisation")
     write(outcome, out)
@@ -223,6 +233,9 @@ def main(args: argparse.Namespace) -> int:
           f"{len(s['synchronised'])} receivers synchronised against {s['reference_receiver']} in "
           f"{len(s['bin_edges']) - 1} bins of {s['bin_hours']:g} h, sound speed {speed_text}, in "
           f"{s['wall_time_s']:.1f} s")
+    if "windows" in s:
+        w = s["windows"]
+        print(f"  fitted in {w['count']} windows of {w['days']:g} days ({w['overlap_hours']:g} h overlap each side)")
     rejected = d["used"] - d["kept"]
     print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
           f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")

@@ -6,6 +6,8 @@ table's positions (Tapley, Schutz & Born 2004, ch. 4).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -80,3 +82,39 @@ def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: n
         "correlation_xy": np.where(refined, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
         "refined": refined, "reason": np.where(refined, "", reason), "sigma_ratio": ratio,
         "sigma_ratio_without": without, "worst_tag": worst})
+
+
+def _loo(summary: dict[str, Any]) -> dict[str, Any] | None:
+    """The sync tags' leave-one-out in a summary: their median error [m] and NEES inside the array, or None."""
+    t = summary.get("sync_tags") or {}
+    if not t:
+        return None
+    return {"median_error_m": t["median_error_m"], "nees_mean_inside": t["nees_mean_inside"],
+            "nees_median_inside": t["nees_median_inside"], "tags": t["tags"]}
+
+
+def _kept(refined, table, survey_sigma: float):
+    """The refined synchronisation where its sync tags' leave-one-out median error is not larger than the table's
+    (both recorded in ``summary["positions"]["leave_one_out"]``), else the table's, said in one warning."""
+    before, after = _loo(table.summary), _loo(refined.summary)
+    worse = after is None or (before is not None and after["median_error_m"] > before["median_error_m"])
+    record = {"table": before, "refined": after, "kept": "table" if worse else "refined",
+              "rule": "the refined positions kept where their sync tags' median leave-one-out error is not larger "
+                      "than the table's (the table's NEES with the survey sigma as its error)"}
+    record["table_nees_survey_sigma_m"] = survey_sigma
+    if not worse:
+        refined.summary["positions"]["leave_one_out"] = record
+        return refined
+    positions = refined.positions.copy()
+    was = "none positioned" if after is None else f"{after['median_error_m']:.3g} m"
+    why = f"the refinement worsened the sync tags' leave-one-out (median error {before['median_error_m']:.3g} m " \
+          f"with the table's, {was} refined)" if before is not None else "the refinement could not be checked"
+    positions["reason"] = np.where(positions["refined"], why, positions["reason"])
+    positions["refined"] = False
+    positions[["x_m", "y_m"]] = positions[["table_x_m", "table_y_m"]].to_numpy()
+    positions[["shift_x_m", "shift_y_m", "shift_m"]] = 0.0
+    positions[["sigma_x_m", "sigma_y_m", "correlation_xy"]] = np.nan
+    table.positions = positions
+    table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record}
+    table.summary.setdefault("warnings", []).append(f"refine positions: {why}: the table's positions kept")
+    return table

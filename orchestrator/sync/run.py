@@ -39,13 +39,15 @@ from sblsim.models.sync.noise import receiver_noise
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import check_resolution, residual_warning, time_quantum
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED, SPEED_TOLERANCE
+from sblsim.models.sync.season import breaks_in_windows
+from sblsim.models.sync.windows import OVERLAP_HOURS, WINDOW_DAYS, season_windows
 from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
 from sblsim.orchestrator.sync.declared import check_sync_positions, sync_scale
-from sblsim.orchestrator.sync.refined_positions import _identify, _positions
+from sblsim.orchestrator.sync.refined_positions import _identify, _kept, _positions
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
@@ -116,8 +118,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                 survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
-                receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None
-                ) -> SyncOutcome:
+                receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None,
+                window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Before the clocks are fitted (once the sync tags' arrivals are grouped into emissions) the times' rounding is
@@ -164,6 +166,10 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         Other readings of the table's positions, by what they assume (``"latitude and longitude swapped"``): the same
         receivers' ``x``, ``y`` [m] as read that way; where the table is refused for its distances and one of these
         fits the travel times, the refusal names it as the cause.
+    window_days : float or None
+        [days] a season longer than this and its overlaps fitted in windows of it
+        (:mod:`sblsim.models.sync.windows`, ``summary["windows"]``); None or 0: one fit. With ``refine_positions``
+        one fit (the positions are the season's).
 
     Returns
     -------
@@ -180,7 +186,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     started = clock.perf_counter()
     args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
     if not refine_positions:
-        return _synchronise(*args, timings=timings, receivers_file=receivers_file, alternatives=alternatives)
+        return _synchronise(*args, timings=timings, receivers_file=receivers_file, alternatives=alternatives,
+                            window_days=window_days)
     refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings,
                            receivers_file=receivers_file, alternatives=alternatives)
     table = _synchronise(*args, table_sigma=survey_sigma, receivers_file=receivers_file, alternatives=alternatives)
@@ -189,48 +196,13 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     return outcome
 
 
-def _loo(summary: dict[str, Any]) -> dict[str, Any] | None:
-    """The sync tags' leave-one-out in a summary: their median error [m] and NEES inside the array, or None."""
-    t = summary.get("sync_tags") or {}
-    if not t:
-        return None
-    return {"median_error_m": t["median_error_m"], "nees_mean_inside": t["nees_mean_inside"],
-            "nees_median_inside": t["nees_median_inside"], "tags": t["tags"]}
-
-
-def _kept(refined: SyncOutcome, table: SyncOutcome, survey_sigma: float) -> SyncOutcome:
-    """The refined synchronisation where its sync tags' leave-one-out median error is not larger than the table's
-    (both recorded in ``summary["positions"]["leave_one_out"]``), else the table's, said in one warning."""
-    before, after = _loo(table.summary), _loo(refined.summary)
-    worse = after is None or (before is not None and after["median_error_m"] > before["median_error_m"])
-    record = {"table": before, "refined": after, "kept": "table" if worse else "refined",
-              "rule": "the refined positions kept where their sync tags' median leave-one-out error is not larger "
-                      "than the table's (the table's NEES with the survey sigma as its error)"}
-    record["table_nees_survey_sigma_m"] = survey_sigma
-    if not worse:
-        refined.summary["positions"]["leave_one_out"] = record
-        return refined
-    positions = refined.positions.copy()
-    was = "none positioned" if after is None else f"{after['median_error_m']:.3g} m"
-    why = f"the refinement worsened the sync tags' leave-one-out (median error {before['median_error_m']:.3g} m " \
-          f"with the table's, {was} refined)" if before is not None else "the refinement could not be checked"
-    positions["reason"] = np.where(positions["refined"], why, positions["reason"])
-    positions["refined"] = False
-    positions[["x_m", "y_m"]] = positions[["table_x_m", "table_y_m"]].to_numpy()
-    positions[["shift_x_m", "shift_y_m", "shift_m"]] = 0.0
-    positions[["sigma_x_m", "sigma_y_m", "correlation_xy"]] = np.nan
-    table.positions = positions
-    table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record}
-    table.summary.setdefault("warnings", []).append(f"refine positions: {why}: the table's positions kept")
-    return table
-
-
 def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                  series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                  reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
                  table_sigma: float | None = None, receivers_file: str | None = None,
-                 alternatives: dict[str, pd.DataFrame] | None = None) -> SyncOutcome:
+                 alternatives: dict[str, pd.DataFrame] | None = None, window_days: float | None = None
+                 ) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
     as :func:`synchronise` (its parameters, ``table_sigma`` aside).
@@ -342,8 +314,13 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     geometry = Geometry(tag_home[tag], positions, float(survey_sigma)) if refine_positions else None
     # a receiver whose clock jumped or went back split into clock segments (sblsim.models.sync.breaks): each clock
     # row a receiver's (its first segment) or a later segment's, `rows` each arrival's (-1 set aside at a break)
+    # a season longer than a window and its overlaps fitted window by window (sblsim.models.sync.windows)
+    windows = season_windows(time[used], width, window_days * 86400.0, OVERLAP_HOURS * 3600.0) \
+        if window_days and geometry is None else None
     fit = fit_with_breaks(receiver, emission, time, distance, slowness, used, linked, start, width, tag,
-                          geometry=geometry, timings=timings, part=part)
+                          geometry=geometry, timings=timings, part=part) if windows is None else \
+        breaks_in_windows(windows, receiver, emission, time, distance, slowness, used, linked, start, width, tag,
+                          timings=timings, part=part)
     # a break within a few arrivals of a clock's end (too near to fit a segment): its times from there set aside
     fit, ends = cut_ends(fit, receiver, emission, time, distance, slowness, used, tag)
     identified = fits = None
@@ -388,7 +365,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     tick = clock.perf_counter()
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
                            width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
-                           fits, table_sigma)
+                           fits, table_sigma, windows)
     refined = _positions(fit, positions, names, linked, identified, tag_names) if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
@@ -436,6 +413,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                                "sync tag and with each one left out (sblsim.models.sync.identifiability); the others' "
                                "positions the table's (the clocks fitted with every receiver at the survey's prior)"}
         summary["wall_time_s"] = clock.perf_counter() - started
+    if windows is not None:
+        summary["windows"] = {"days": float(window_days), "overlap_hours": OVERLAP_HOURS, "count": len(windows),
+                              "edges": (windows.edges + origin).tolist()}
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
 
 

@@ -16,6 +16,7 @@ import pandas as pd
 from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
+from sblsim.models.sync.windows import WINDOW_DAYS
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
@@ -69,13 +70,13 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
 def synchronise_files(detections: Path, receivers: Path, format: str | None, sound_speed: float | None,
                       sound_speed_file: Path | None, bin_hours: float, reference: str | None,
                       refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
-                      frame: str | None = None) -> SyncOutcome:
+                      frame: str | None = None, window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """``sblsim sync``'s synchronisation from its files (:func:`sblsim.orchestrator.commands.sync.sync`'s arguments,
     checked): the detections read (in ``format``; None: from the file's first line), the deployments (in ``crs``,
     projected to ``frame``) and the sound-speed series where given, synchronised (:func:`synchronise_study`), the
     table's positions checked against the sync tags' clock-free travel times first
     (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`, once the arrivals are grouped, before the
-    clocks are fitted).
+    clocks are fitted); a season longer than ``window_days`` [days] fitted in windows (0: one fit).
 
     Raises
     ------
@@ -90,7 +91,7 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)
     return synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
                              refine_positions=refine_positions, survey_sigma=survey_sigma,
-                             receivers_file=deployments.source)
+                             receivers_file=deployments.source, window_days=window_days or None)
 
 
 

@@ -14,6 +14,8 @@ from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clocks import Geometry, fit_clocks
 from sblsim.models.sync.emissions import connected
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
+from sblsim.models.sync.season import clocks_in_windows
+from sblsim.models.sync.windows import Windows
 from sblsim.orchestrator.sync import segments
 
 
@@ -21,7 +23,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
                geometry: Geometry | None = None, clock: np.ndarray | None = None,
                site: np.ndarray | None = None, fits: dict | None = None,
-               table_sigma: float | None = None) -> pd.DataFrame:
+               table_sigma: float | None = None, windows: Windows | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
@@ -41,7 +43,9 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
     (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row. ``fits``: the fits without
     each tag already made (:func:`_fit_without`, by tag). ``table_sigma`` [m]: without ``geometry``, the table's
-    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error)."""
+    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error). ``windows``: the
+    season's clocks were fitted in these windows (:mod:`sblsim.models.sync.windows`), and so is each fit without a
+    tag."""
     dim = positions.shape[1]
     rows = []
     c = receiver if clock is None else clock
@@ -56,7 +60,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
         if leave_one_out:
             got = fits[i] if fits is not None and i in fits else _fit_without(
                 i, fit, c, tag, emission, time, distance, slowness, used, start, width, len(linked), geometry,
-                None if clock is None else site, steady)
+                None if clock is None else site, steady, windows)
             if got is None:
                 notes.append(f"sync tag {name}: the clocks cannot be fitted without it; not positioned")
                 continue
@@ -125,7 +129,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
 
 
 def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,
-                 geometry: Geometry | None, site, steady) -> tuple[ClockFit, np.ndarray] | None:
+                 geometry: Geometry | None, site, steady, windows: Windows | None = None
+                 ) -> tuple[ClockFit, np.ndarray] | None:
     """The clocks fitted without sync tag ``i``'s arrivals (the kept arrivals and scales of ``fit``; with
     ``geometry`` the positions refined from ``fit``'s) and the clock rows still synchronised; None where they
     cannot be fitted without it."""
@@ -133,8 +138,12 @@ def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowne
     still = connected(c[without], emission[without], n_rows, start)
     loo = None if geometry is None else Geometry(geometry.source, geometry.positions, geometry.sigma, fit.shift, site)
     try:
-        this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width, keep=fit.kept,
-                          scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
+        if windows is not None:  # (positions fixed: the windows' fits are made without geometry)
+            this = clocks_in_windows(windows, c, emission, time, distance, slowness, without, still, start, width,
+                                     fit.kept, fit.scale, steady)
+        else:
+            this = fit_clocks(c, emission, time, distance, slowness, without, still, start, width, keep=fit.kept,
+                              scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
     except ModelError:
         return None
     return this, still
