@@ -2,7 +2,7 @@
 sync tag, 30 days (about 1.3 × 10⁶ sync detections), on one core.
 
 Run:  python benchmarks/bench_sync_scale.py [--receivers 70] [--days 30] [--seed 1] [--baseline-days D]
-      [--no-leave-one-out] [--write] [--refine-positions]
+      [--no-leave-one-out] [--write] [--refine-positions] [--window-days D]
 
 The array (:func:`simulate`): receivers on a grid of 200 m (10 columns; each moved by N(0, 20 m) per axis), each
 receiver's clock with an offset uniform in ±2 s and a drift uniform in ±20 ppm (the first receiver's the true time),
@@ -24,7 +24,10 @@ process's high-water mark, reset before each size where Linux allows), the time 
 baseline's (1.00: linear), and the offsets against the simulated clocks (the share within 3 of their sigmas). With
 ``--refine-positions`` the receivers table is the truth plus a survey error of :data:`SURVEY_SIGMA_M` per axis and
 the sync refines the positions with that prior (``refine_positions=True``): the refined positions' RMS error
-against the table's is printed too. A JSON line last.
+against the table's is printed too. ``--window-days`` (default the library's,
+:data:`~sblsim.models.sync.windows.WINDOW_DAYS`; 0: one fit) fits a span longer than a window and its overlaps window
+by window (:mod:`sblsim.models.sync.windows`); the resident memory before the sync (the detections in memory, which
+grow with the span) is printed beside the peak, their difference the sync's own. A JSON line last.
 """
 
 from __future__ import annotations
@@ -124,8 +127,17 @@ def inputs(sim: Simulated, table: np.ndarray | None = None):
     return Detections(frame, "simulated", "yaps"), hydrophones
 
 
+def resident_bytes() -> int:
+    """The process's resident memory now [bytes] (Linux; 0 elsewhere)."""
+    try:
+        with open("/proc/self/status") as status:
+            return next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmRSS:"))
+    except (OSError, StopIteration):
+        return 0
+
+
 def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = True, write: bool = False,
-            refine: bool = False) -> dict:
+            refine: bool = False, window_days: float | None = None) -> dict:
     """One size's sync (module docstring): its stages' times [s], CPU time, peak memory and the offsets' check."""
     from sblsim.orchestrator.sync.run import synchronise
 
@@ -134,12 +146,14 @@ def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = 
     if refine:
         table = sim.positions + np.random.default_rng(seed + 1000).normal(0, SURVEY_SIGMA_M, sim.positions.shape)
     detections, hydrophones = inputs(sim, table)
+    before = resident_bytes()
     reset = reset_peak()
     timings: dict = {}
     start, cpu = time.perf_counter(), time.process_time()
     outcome = synchronise(detections, hydrophones, sound_speed=SOUND_SPEED, bin_hours=1.0, reference="R0",
                           leave_one_out=leave_one_out, timings=timings, refine_positions=refine,
-                          survey_sigma=SURVEY_SIGMA_M)
+                          survey_sigma=SURVEY_SIGMA_M,
+                          **({} if window_days is None else {"window_days": window_days or None}))
     sync_s, sync_cpu = time.perf_counter() - start, time.process_time() - cpu
     write_s = 0.0
     if write:
@@ -165,6 +179,7 @@ def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = 
             "leave_one_out_s": timings["leave_one_out"],
             "tables_s": sync_s - timings["grouping"] - timings["fit"] - timings["leave_one_out"],
             "sync_s": sync_s, "sync_cpu_s": sync_cpu, "write_s": write_s, "peak_bytes": peak, "peak_reset": reset,
+            "resident_before_bytes": before, "windows": (outcome.summary.get("windows") or {}).get("count", 1),
             "offsets_within_3_sigma": within, "offset_error_median_us": float(np.median(np.abs(error[others])) * 1e6),
             "offset_sigma_median_us": float(np.median(sigma[others]) * 1e6),
             "sync_tags_positioned": int(len(outcome.sync_tags)),
@@ -183,19 +198,21 @@ def main() -> None:
     parser.add_argument("--write", action="store_true", help="time the files and figures too")
     parser.add_argument("--refine-positions", action="store_true",
                         help=f"a table {SURVEY_SIGMA_M:g} m off per axis, the positions refined with the clocks")
+    parser.add_argument("--window-days", type=float, default=None,
+                        help="the sync's windows [days] (default the library's; 0: one fit)")
     args = parser.parse_args()
     if args.receivers < 3 or args.days <= 0:
         parser.error("--receivers: at least 3; --days: positive")
     baseline_days = args.baseline_days or args.days / 10
     measure(min(args.receivers, 10), 1.0, args.seed, leave_one_out=False)  # untimed: the modules loaded
-    rows = [measure(args.receivers, d, args.seed, not args.no_leave_one_out, args.write, args.refine_positions)
-            for d in (baseline_days, args.days)]
+    rows = [measure(args.receivers, d, args.seed, not args.no_leave_one_out, args.write, args.refine_positions,
+                    args.window_days) for d in (baseline_days, args.days)]
     base = rows[0]
     print(f"sync of a synthetic array of {args.receivers} receivers, one sync tag each, 1 h bins, one core "
           f"(OMP/OPENBLAS/MKL threads {os.environ.get('OPENBLAS_NUM_THREADS')})")
     header = (f"{'days':>6} {'detections':>11} {'knots':>7} {'group':>6} {'reweight':>8} {'lsq':>6} {'sigmas':>6} "
               f"{'fit':>6} {'LOO':>7} {'tables':>6} {'sync':>7} {'CPU':>7} {'write':>6} {'peak GiB':>8} "
-              f"{'per det.':>8} {'3 sigma':>7}")
+              f"{'per det.':>8} {'3 sigma':>7} {'windows':>7} {'before GiB':>10}")
     print(header)
     for r in rows:
         ratio = (r["sync_s"] / r["detections"]) / (base["sync_s"] / base["detections"])
@@ -204,7 +221,7 @@ def main() -> None:
               f"{r['reweighting_s']:>8.1f} {r['least_squares_s']:>6.1f} {r['covariance_s']:>6.1f} {r['fit_s']:>6.1f} "
               f"{r['leave_one_out_s']:>7.1f} {r['tables_s']:>6.1f} {r['sync_s']:>7.1f} {r['sync_cpu_s']:>7.1f} "
               f"{r['write_s']:>6.1f} {r['peak_bytes'] / 1024**3:>8.2f} {ratio:>8.2f} "
-              f"{r['offsets_within_3_sigma']:>7.3f}")
+              f"{r['offsets_within_3_sigma']:>7.3f} {r['windows']:>7} {r['resident_before_bytes'] / 1024**3:>10.2f}")
     last = rows[-1]
     if args.refine_positions:
         print("positions refined: RMS error per axis " + ", ".join(

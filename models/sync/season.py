@@ -21,14 +21,20 @@ def breaks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarr
                       reference: int, bin_width: float, tag: np.ndarray, timings: dict | None = None,
                       part: np.ndarray | None = None) -> ClockFit:
     """:func:`~sblsim.models.sync.breaks.fit_with_breaks` (its parameters) in ``windows`` (:func:`fit_in_windows`):
-    in each, the receivers of ``synchronised`` tied to ``reference`` by the window's own emissions."""
+    in each, the receivers of ``synchronised`` tied to ``reference`` by the window's own emissions; ``timings``
+    filled with each stage's seconds summed over the windows."""
+    timings = {} if timings is None else timings
 
     def one(rows: np.ndarray) -> ClockFit:
         u = used[rows]
         linked = connected(receiver[rows][u], emission[rows][u], len(synchronised), reference) & synchronised
-        return fit_with_breaks(receiver[rows], emission[rows], time[rows], distance[rows],
-                               None if slowness is None else slowness[rows], u, linked, reference, bin_width,
-                               tag[rows], timings=timings, part=None if part is None else part[rows])
+        own: dict = {}
+        fit = fit_with_breaks(receiver[rows], emission[rows], time[rows], distance[rows],
+                              None if slowness is None else slowness[rows], u, linked, reference, bin_width,
+                              tag[rows], timings=own, part=None if part is None else part[rows])
+        for stage, seconds in own.items():  # each stage's seconds summed over the windows
+            timings[stage] = timings.get(stage, 0.0) + seconds
+        return fit
 
     return fit_in_windows(one, windows, receiver, time, emission, len(synchronised))
 

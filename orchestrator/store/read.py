@@ -5,9 +5,11 @@ reserved at import) are loaded only where a store is read."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Iterable
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.detections import Detections, read_detections
+from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.store.layout import STORE_FILE
 
 
@@ -18,9 +20,11 @@ def is_store(path: str | Path) -> bool:
     return path.is_dir() and (path / STORE_FILE).is_file()
 
 
-def read_any(path: str | Path, format: str | None = None) -> Detections:
+def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | None = None) -> Detections:
     """A detections file read whole (:func:`~sblsim.orchestrator.readers.detections.read_detections`, within its
-    limits), or a store's detections (:meth:`~.query.Store.detections`: no row limit but memory), as one table.
+    limits), or a store's detections (:meth:`~.query.Store.detections`: no row limit but memory), as one table; of a
+    store, where ``tags`` are given, those tags' rows alone (each found among the store's tags as an id or a full ID:
+    :func:`~sblsim.orchestrator.readers.transmitters.match`; a name it does not hold, or holds twice, reads nothing).
 
     Raises
     ------
@@ -36,9 +40,18 @@ def read_any(path: str | Path, format: str | None = None) -> Detections:
     if format is not None and format != held:
         raise ModelError(f"format: {format!r}, but the store {str(path)!r} holds {held!r} detections (read from "
                          f"{store.info.get('source')!r}); allowed: {held!r} or none")
-    detections = store.detections()
+    keys = None if tags is None else sorted({k for t in tags if (k := _held(t, store.tags)) is not None})
+    detections = store.detections(tags=keys)
     detections.source = f"{path} (the store of {store.info.get('source')})"
     return detections
+
+
+def _held(name: str, held: list[str]) -> str | None:
+    """The store's tag ``name`` stands for, None where none (or two: an id two code spaces share)."""
+    try:
+        return match(name, held)
+    except ModelError:
+        return None
 
 
 __all__ = ["is_store", "read_any"]

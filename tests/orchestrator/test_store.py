@@ -272,3 +272,32 @@ def test_a_file_too_large_to_read_whole_says_so_and_is_read_from_its_store(detec
         read_detections(path, None)
     ingest(path, tmp_path / "s", piece_bytes=16384)
     pd.testing.assert_frame_equal(read_any(tmp_path / "s").frame, want)
+
+
+def test_sync_of_a_store_reads_its_sync_tags_alone_and_fits_the_clocks_of_its_file(tmp_path, monkeypatch):
+    """``sblsim sync`` on a store asks the store for the deployments' sync tags' rows alone (the animals' never
+    read) and fits the same clocks as on the file it was stored from (offsets within a nanosecond: the frame is
+    chosen over the same deployments)."""
+    import sblsim
+    from sblsim.orchestrator.store import query
+
+    sim = simulate_study(n_receivers=5, n_tags=3, days=0.25, seed=3)
+    files = sim.write(tmp_path / "study", "vue")
+    ingest(files["detections"], tmp_path / "s")
+    asked = []
+    real = query.Store.detections
+
+    def spy(self, tags=None, *args, **kwargs):
+        asked.append(tags)
+        return real(self, tags, *args, **kwargs)
+
+    monkeypatch.setattr(query.Store, "detections", spy)
+    from_store = sblsim.sync(tmp_path / "s", receivers=files["deployments"], sound_speed=1480.0)
+    from_file = sblsim.sync(files["detections"], receivers=files["deployments"], sound_speed=1480.0)
+    sync_tags = set(pd.read_csv(files["deployments"])["transmitter"])
+    assert asked == [sorted(sync_tags)]
+    held, whole = from_store.summary["detections"], from_file.summary["detections"]
+    assert held["sync_arrivals"] == whole["sync_arrivals"] == held["rows"] < whole["rows"]
+    a, b = from_store.offsets, from_file.offsets
+    assert list(a["receiver"]) == list(b["receiver"]) and list(a["bin"]) == list(b["bin"])
+    assert np.allclose(a["offset_start_s"], b["offset_start_s"], rtol=0, atol=1e-9)
