@@ -49,12 +49,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
-            return offsets_clocks(outcome.offsets), table, {
-                "source": "synchronised here", "reference_receiver": s["reference_receiver"],
-                "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
-                "clock_breaks": s["clock_breaks"],
-                "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
-                "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}, outcome
+            info = {"source": "synchronised here", "reference_receiver": s["reference_receiver"],
+                    "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
+                    "clock_breaks": s["clock_breaks"],
+                    "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
+                    "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}
+            if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
+                info["windows"] = s["windows"]
+            return offsets_clocks(outcome.offsets), table, info, outcome
     times = assigned.detections.frame["time"].to_numpy(float)
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
     notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else

@@ -32,7 +32,9 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append(f"  clocks synchronised here against {c['reference_receiver']}: {c['receivers']} receivers, median "
                    f"|residual| {c['median_abs_residual_m']:.3g} m" + (f"; not synchronised: "
                                                                       f"{', '.join(c['not_synchronised'])}"
-                                                                      if c["not_synchronised"] else ""))
+                                                                      if c["not_synchronised"] else "")
+                   + (f"; in {c['windows']['count']} windows of {c['windows']['days']:g} days" if "windows" in c
+                      else ""))
     elif c["source"] == "given":
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
     elif "one receiver" in c["source"]:

@@ -75,3 +75,33 @@ def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(seaso
                      "--out", str(tmp_path / f"r{days}")])
         err = capsys.readouterr().err
         assert code == 2 and "--window-days" in err and "[0, 366]" in err and not (tmp_path / f"r{days}").exists()
+
+
+def test_a_clock_reset_in_the_files_order_at_a_windows_edge(tmp_path, capsys):
+    """Receiver R2's time going back 3000 s at day 2 of 5 (a reset at a download, its rows in the order it logged
+    them: a clock part of the reader's), at the edge of windows of 1 day: the same break said, the same clock
+    segments and parts in ``offsets.csv``, every sync arrival's synchronised time within 0.1 ms of one fit's."""
+    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=21, side=700.0, interval=(600.0, 900.0),
+                        jump=(2, 2 * 86400.0, -3000.0))
+    tau = sim.true_time(sim.receiver, sim.time, sim.after)
+    time = sim.reading(sim.receiver, tau) + EPOCH
+    order = np.lexsort((tau, sim.receiver))  # each receiver's rows as it logged them
+    epo = np.floor(time[order]).astype(np.int64)
+    names = np.array([f"R{j}" for j in range(N)])
+    pd.DataFrame({"epo": epo, "frac": [f"{v:.9f}" for v in np.clip(time[order] - epo, 0, 0.999999999)],
+                  "tag": np.array([f"S{i}" for i in sim.tag])[order],
+                  "serial": names[sim.receiver][order]}).to_csv(tmp_path / "d.csv", index=False)
+    pd.DataFrame({"serial": names, "sync_tag": [f"S{j}" for j in range(N)], "x_m": sim.positions[:, 0],
+                  "y_m": sim.positions[:, 1]}).to_csv(tmp_path / "h.csv", index=False)
+    said = []
+    for days in ("1", "0"):
+        assert main(["sync", str(tmp_path / "d.csv"), "--receivers", str(tmp_path / "h.csv"), "--sound-speed",
+                     str(sim.sound_speed), "--reference", "R0", "--window-days", days, "--out",
+                     str(tmp_path / days)]) == 0
+        said.append([line for line in capsys.readouterr().err.splitlines() if "clock break" in line])
+    assert len(said[0]) == 1 and said[0] == said[1] and "goes back" in said[0][0]
+    a, b = read_clocks(tmp_path / "1"), read_clocks(tmp_path / "0")
+    assert list(a.owner) == list(b.owner) == [0, 1, 2, 2, 3, 4, 5] and list(a.parts) == list(b.parts)
+    assert np.allclose(a.spans, b.spans)
+    synced = [pd.read_csv(tmp_path / d / "residuals.csv")["time_sync"].to_numpy() for d in ("1", "0")]
+    assert np.nanmax(np.abs(synced[0] - synced[1])) < 1e-4
