@@ -2,7 +2,9 @@
 breaks (:func:`breaks_in_windows`, as :func:`~sblsim.models.sync.breaks.fit_with_breaks` fits one span) and the
 clocks refitted with some arrivals left out (:func:`clocks_in_windows`, as
 :func:`~sblsim.models.sync.clocks.fit_clocks` with an earlier fit's rejections and scales: a sync tag's
-leave-one-out). In each window the receivers tied to the reference receiver are those its own emissions tie.
+leave-one-out). In each window the receivers tied to the reference receiver are those its own emissions tie; a
+window the reference receiver does not hear (recovered, its clock gone) is fitted against the receiver of its most
+arrivals, the season's time base carried to it (:mod:`sblsim.models.sync.windows`).
 """
 
 from __future__ import annotations
@@ -27,16 +29,16 @@ def breaks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarr
 
     def one(rows: np.ndarray) -> ClockFit:
         u = used[rows]
-        linked = connected(receiver[rows][u], emission[rows][u], len(synchronised), reference) & synchronised
+        linked, here = _tied(receiver[rows][u], emission[rows][u], synchronised, reference)
         own: dict = {}
         fit = fit_with_breaks(receiver[rows], emission[rows], time[rows], distance[rows],
-                              None if slowness is None else slowness[rows], u, linked, reference, bin_width,
+                              None if slowness is None else slowness[rows], u, linked, here, bin_width,
                               tag[rows], timings=own, part=None if part is None else part[rows])
         for stage, seconds in own.items():  # each stage's seconds summed over the windows
             timings[stage] = timings.get(stage, 0.0) + seconds
         return fit
 
-    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised))
+    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised), reference)
 
 
 def clocks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarray, time: np.ndarray,
@@ -49,12 +51,26 @@ def clocks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarr
 
     def one(rows: np.ndarray) -> ClockFit:
         u = used[rows]
-        linked = connected(receiver[rows][u], emission[rows][u], len(synchronised), reference) & synchronised
+        linked, here = _tied(receiver[rows][u], emission[rows][u], synchronised, reference)
         return fit_clocks(receiver[rows], emission[rows], time[rows], distance[rows],
-                          None if slowness is None else slowness[rows], u, linked, reference, bin_width,
+                          None if slowness is None else slowness[rows], u, linked, here, bin_width,
                           keep=keep[rows], scale=scale, sigmas=False, steady=steady)
 
-    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised))
+    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised), reference)
+
+
+def _tied(receiver: np.ndarray, emission: np.ndarray, synchronised: np.ndarray, reference: int
+          ) -> tuple[np.ndarray, int]:
+    """(R,) bool, a window's receivers of ``synchronised`` tied to ``reference`` by its arrivals (``receiver``,
+    ``emission``), and the window's reference: ``reference``, or where it ties no other receiver (recovered, its
+    clock gone) the receiver of the most arrivals there (the windows carry the season's time base to it:
+    :mod:`sblsim.models.sync.windows`)."""
+    n = len(synchronised)
+    linked = connected(receiver, emission, n, reference) & synchronised
+    if linked.sum() >= 2 or not len(receiver):
+        return linked, reference
+    here = int(np.argmax(np.bincount(receiver, minlength=n)[:n] * synchronised))
+    return connected(receiver, emission, n, here) & synchronised, here
 
 
 __all__ = ["breaks_in_windows", "clocks_in_windows"]

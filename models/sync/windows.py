@@ -19,7 +19,12 @@ clocks kept over its own span alone:
   holds it, in its span or in its overlap (a break at a window's edge is inside both windows' fits), and kept from
   the window whose span holds its instant;
 * bins no window's knots reach (a receiver out of the water for a window) are bridged by linear interpolation, the
-  clock's ends extended with their end bins' drifts, as the drift prior bridges them in one fit.
+  clock's ends extended with their end bins' drifts, as the drift prior bridges them in one fit;
+* a window the reference receiver no longer hears (recovered: its clock gone) is fitted against another receiver's
+  clock, and put on the reference's by that receiver's offset **carried** from the last window that synchronised it
+  (the line through its offsets there carried on from the edge): the time base runs on as the reference's clock
+  would, where no arrival sees it (the emissions' times absorb any common change of all clocks; one fit extends it
+  by its drift prior alone).
 
 Each arrival's residual, weight and rejection are its own emission's window's; each clock's noise scale the
 arrivals-weighted root mean square of its windows' scales; an estimated slowness each window's own (the water
@@ -99,7 +104,7 @@ class _Piece:
 
 
 def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, receiver: np.ndarray,
-                   time: np.ndarray, emission: np.ndarray, n_rows: int) -> ClockFit:
+                   time: np.ndarray, emission: np.ndarray, n_rows: int, reference: int) -> ClockFit:
     """The clocks of a season fitted window by window and joined (the module docstring).
 
     Parameters
@@ -118,6 +123,10 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
         (n,) int >= 0, each arrival's emission.
     n_rows : int
         The season's clock rows before any break (the receivers).
+    reference : int
+        The receiver whose clock is the season's time base (its offsets 0). A window ``fit_one`` fits against
+        another receiver's clock (the reference's recovered) is put on it by that receiver's offset carried from the
+        last earlier window that synchronised it (the line through its offsets there).
 
     Returns
     -------
@@ -128,7 +137,8 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
     Raises
     ------
     ModelError
-        As ``fit_one``, the window's span named.
+        As ``fit_one``, the window's span named; the first window not against ``reference``; a later one against a
+        receiver no earlier window synchronised.
     """
     time = np.asarray(time, float)
     emission = np.asarray(emission, np.int64)
@@ -142,14 +152,63 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
         if not len(rows):
             continue
         try:
-            fits.append((i, rows, fit_one(rows)))
+            fit = fit_one(rows)
         except ModelError as exc:
             raise ModelError(f"{exc} (in the window from {max(lo, instant.min()):.0f} s to {min(hi, instant.max()):.0f}"
                              " s of the clocks' time base: fitted in windows, each window needs its own sync-tag "
-                             "emissions heard by the reference receiver and another)") from None
+                             "emissions heard by two receivers)") from None
+        if not fits and _reference(fit) != reference:
+            raise ModelError(f"sync: the reference receiver ({reference}) ties no other receiver in the season's first "
+                             "window; allowed: a reference receiver in the water from the start (--reference)")
+        fits.append((i, rows, _carried(fit, fits, reference, lo) if fits else fit))
     if not fits:
         raise ModelError("sync: no sync-tag arrival in any window; nothing to synchronise")
     return _joined(fits, windows, np.asarray(receiver, np.int64), instant, emission, n_rows)
+
+
+def _reference(fit: ClockFit) -> int:
+    """The receiver a window's clocks are against: its clock row held at 0 with no sigma (-1: none)."""
+    zero = np.flatnonzero((fit.knots == 0).all(axis=1) & (fit.knot_sigma == 0).all(axis=1))
+    if not len(zero):
+        return -1
+    return int(zero[0] if fit.site is None else fit.site[zero[0]])
+
+
+def _carried(fit: ClockFit, earlier: list, reference: int, start: float) -> ClockFit:
+    """A window's clocks put against the season's ``reference`` receiver where the window's are against another's
+    (the season's reference recovered, its clock gone: :mod:`sblsim.models.sync.season`): every clock's offsets
+    plus that receiver's own offset on the season's reference, carried from the last earlier window that
+    synchronised it (the line through its knots there up to ``start`` [s], this window's own span's start, carried on
+    from its value at ``start``; its sigma there added in quadrature), the emissions' times and the breaks' instants
+    on the reference's clock less it."""
+    here = _reference(fit)
+    if here == reference or here < 0:
+        return fit
+    for _, _, last in reversed(earlier):
+        site = np.arange(len(last.knots)) if last.site is None else last.site
+        rows = [r for r in np.flatnonzero(site == here) if np.isfinite(last.knots[r]).all()]
+        if rows:
+            break
+    else:
+        raise ModelError(f"sync: in a window the reference receiver does not hear, receiver {here} is no clock an "
+                         "earlier window synchronised; nothing carries the time base across")
+    row = rows[-1]
+    width = last.edges[1] - last.edges[0]
+    before = last.edges <= start + 1e-6  # its knots up to this window's own span: their line carried on
+    slope = np.polyfit(last.edges[before], last.knots[row, before], 1)[0] if before.sum() >= 2 else 0.0
+    value = float(np.interp(start, last.edges, last.knots[row]))
+
+    def offset(t):  # [s] the window's reference receiver's offset on the season's reference, carried
+        return value + slope * (np.asarray(t, float) - start)
+
+    sigma = float(np.interp(start, last.edges, np.nan_to_num(last.knot_sigma[row])))
+    # a clock's offset o' on the window's reference at its own time r is read by that reference at r - o': on the
+    # season's reference it is o' + offset(r - o') = o' (1 - slope) + offset(r)
+    knots = fit.knots * (1.0 - slope) + offset(fit.edges)[None, :]
+    breaks = None if fit.breaks is None else [replace(b, time=b.time - float(offset(b.time))) for b in fit.breaks]
+    return replace(fit, knots=knots, knot_sigma=np.sqrt(fit.knot_sigma ** 2 + sigma ** 2),
+                   drift=np.diff(knots, axis=1) / width, emission_time=fit.emission_time - offset(fit.emission_time),
+                   breaks=breaks)
 
 
 def _pieces(fits, windows: Windows) -> list[_Piece]:

@@ -381,6 +381,12 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         # its entry's offsets and drifts are its first segment's; offsets.csv has every segment's
         mine = summary["receivers"][entry["receiver"]]
         mine["clock_segments"] = max(mine.get("clock_segments", 1), entry["segment_after"])
+    gone = time[used].max() - time[used & (receiver == start)].max()
+    if gone > width:  # beyond the reference's last arrival no arrival sees the time base (the clocks' common drift)
+        summary.setdefault("warnings", []).append(
+            f"reference receiver {names[start]}'s sync-tag arrivals end {gone / 86400:.3g} days before the others': "
+            "beyond them the times are the other clocks' carried on, good to each other, not to a clock; allowed: a "
+            "reference receiver in the water the whole time (--reference)")
     for end in ends:  # each break too near a clock's end named in one line
         summary.setdefault("warnings", []).append(segments.end_line(end, names, origin))
     fitted = {(e["reset"]["receiver"], e["reset"]["line"]) for e in summary["clock_breaks"] if e.get("reset")}

@@ -138,3 +138,35 @@ def test_the_windows_of_a_season():
     for window, overlap in ((1800.0, 12 * 3600.0), (day, 60.0)):
         with pytest.raises(ModelError, match="at least a bin"):
             season_windows(np.array([0.0, 30 * day]), WIDTH, window, overlap)
+
+
+def test_the_time_base_carried_past_the_reference_receivers_recovery():
+    """Receiver 0 (the reference) and its sync tag recovered at day 5 of 10, windows of 3 days: the last window,
+    which it never hears, fitted against another receiver and carried onto receiver 0's time base. What the arrivals
+    determine, each clock against receiver 1's, is as good as one fit's (within 5 % RMS after the recovery); the
+    time base itself, which no arrival sees (the emissions' times absorb a change common to all clocks), within
+    0.2 s of receiver 0's clock carried on (one fit's drift prior alone: seconds here)."""
+    sim = simulate_sync(n_receivers=N, hours=10 * 24, seed=3, side=800.0, echo_share=0.03,
+                        interval=(1200.0, 1800.0))
+    tau = sim.true_time(sim.receiver, sim.time)
+    on = ~(((sim.receiver == 0) | (sim.tag == 0)) & (tau > 5 * 86400.0))
+    receiver, tag, logged = sim.receiver[on], sim.tag[on], sim.time[on]
+    origin = np.floor(logged.min())
+    t = logged - origin
+    emission, duplicate, single = sync_emissions(tag, receiver, t, np.full(N, 300.0))
+    used = ~duplicate & ~single
+    distance = np.linalg.norm(sim.positions[tag] - sim.positions[receiver], axis=1)
+    args = (receiver, emission, t, distance, np.full(len(t), 1 / sim.sound_speed), used,
+            connected(receiver[used], emission[used], N, 0), 0, WIDTH)
+    windows = season_windows(t[used], WIDTH, 3 * 86400, OVERLAP * 3600)
+    fits = {"one": fit_with_breaks(*args, tag), "windows": breaks_in_windows(windows, *args, tag)}
+    late = used & (receiver >= 2) & (sim.true_time(receiver, logged) > 6.5 * 86400)
+    truth = sim.true_time(receiver[late], logged[late])
+    r1 = sim.reading(np.full(late.sum(), 1), truth) - origin  # receiver 1's clock at the same instants
+    error, base = {}, {}
+    for name, fit in fits.items():
+        relative = fit.offset(receiver[late], t[late]) - fit.offset(np.full(late.sum(), 1), r1)
+        error[name] = np.sqrt(np.mean((relative - (t[late] - r1)) ** 2))
+        base[name] = np.abs(fit.offset(receiver[late], t[late]) - sim.offset(receiver[late], logged[late], 0)).max()
+    assert error["windows"] <= 1.05 * error["one"] and error["one"] < 1e-4
+    assert base["windows"] < 0.2
