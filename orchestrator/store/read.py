@@ -29,7 +29,8 @@ def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | 
     Raises
     ------
     ModelError
-        The reader's refusals; a store that is none (:class:`~.query.Store`), or whose format is not ``format``.
+        The reader's refusals; a store that is none (:class:`~.query.Store`), or whose format is not ``format``; of
+        a store, ``tags`` of which it holds none.
     """
     if not is_store(path):
         return read_detections(path, format)
@@ -41,6 +42,11 @@ def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | 
         raise ModelError(f"format: {format!r}, but the store {str(path)!r} holds {held!r} detections (read from "
                          f"{store.info.get('source')!r}); allowed: {held!r} or none")
     keys = None if tags is None else sorted({k for t in tags if (k := _held(t, store.tags)) is not None})
+    if keys == [] and tags:
+        asked = sorted(map(str, tags))
+        raise ModelError(f"tag: {', '.join(asked[:8])} {'is' if len(asked) == 1 else 'are'} never detected in the "
+                         f"store {str(path)!r}; allowed: one of {', '.join(store.tags[:8])}"
+                         + (f" ({len(store.tags)} tags)" if len(store.tags) > 8 else ""))
     detections = store.detections(tags=keys)
     detections.source = f"{path} (the store of {store.info.get('source')})"
     return detections

@@ -303,7 +303,8 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     """Read the files and build the tag's matrix (:func:`build_toa`): :class:`ToaOutcome`. The receivers are a
     study's deployments (:func:`~sblsim.orchestrator.readers.deployments.read_deployments`, in ``crs``, projected
     to ``frame``), each detection at its deployment (the others set aside: ``summary["set_aside"]``); a stated
-    interval the detections contradict refused unless ``force_interval`` (then a warning).
+    interval the detections contradict refused unless ``force_interval`` (then a warning). Of a store
+    (:mod:`~sblsim.orchestrator.store`), the tag's rows alone are read.
 
     Raises
     ------
@@ -318,7 +319,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     clocks = read_clocks(sync)
     shortest = _shortest(ping_type, interval, sequence)
     deployments = read_deployments(receivers, crs, frame)
-    read = read_any(detections, format)
+    read = read_any(detections, format, tags=[tag])  # (of a store, the tag's rows alone)
     array = in_water(read, assign(read, deployments), deployments)  # as the synchronisation took them
     deployments, assigned = array.deployments, array.assigned
     data, table = assigned.detections, assigned.hydrophones

@@ -301,3 +301,27 @@ def test_sync_of_a_store_reads_its_sync_tags_alone_and_fits_the_clocks_of_its_fi
     a, b = from_store.offsets, from_file.offsets
     assert list(a["receiver"]) == list(b["receiver"]) and list(a["bin"]) == list(b["bin"])
     assert np.allclose(a["offset_start_s"], b["offset_start_s"], rtol=0, atol=1e-9)
+
+
+def test_toa_of_a_store_reads_its_tag_alone_and_builds_its_files_matrix(tmp_path, monkeypatch):
+    """``sblsim toa`` on a store asks it for the tag's rows alone and builds the matrix it builds from the file (the
+    same pings, receivers and times); a tag the store never holds refused in one line naming the store's tags."""
+    import sblsim
+    from sblsim.orchestrator.store import query
+
+    sim = simulate_study(n_receivers=5, n_tags=3, days=0.25, seed=3)
+    files = sim.write(tmp_path / "study", "vue")
+    ingest(files["detections"], tmp_path / "s")
+    sblsim.sync(files["detections"], receivers=files["deployments"], sound_speed=1480.0, out=tmp_path / "sync")
+    tag = sim.sheet["transmitter"].iloc[0]
+    from_file = sblsim.toa(files["detections"], receivers=files["deployments"], sync=tmp_path / "sync", tag=tag)
+    asked = []
+    real = query.Store.detections
+    monkeypatch.setattr(query.Store, "detections", lambda self, tags=None, *a, **k: asked.append(tags)
+                        or real(self, tags, *a, **k))
+    from_store = sblsim.toa(tmp_path / "s", receivers=files["deployments"], sync=tmp_path / "sync", tag=tag)
+    assert asked == [[tag]]
+    assert from_store.receivers == from_file.receivers
+    np.testing.assert_array_equal(from_store.toa, from_file.toa)
+    with pytest.raises(ModelError, match=r"^tag: A69-9999-1 is never detected in the store .*; allowed: one of A69"):
+        sblsim.toa(tmp_path / "s", receivers=files["deployments"], sync=tmp_path / "sync", tag="A69-9999-1")

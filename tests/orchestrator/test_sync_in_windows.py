@@ -20,14 +20,9 @@ EPOCH = 1_700_000_000
 N, DAYS = 6, 5.0
 
 
-@pytest.fixture(scope="module")
-def season(tmp_path_factory):
-    """5 days of a simulated array of 6 receivers (sync tags every 20 to 30 min) as a YAPS table and a receivers
-    table, synchronised in windows of 2 days and in one fit."""
-    folder = tmp_path_factory.mktemp("season")
-    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=5, side=700.0, interval=(1200.0, 1800.0))
-    time = sim.time + EPOCH
-    order = np.argsort(time, kind="stable")
+def _write(folder, sim, time, order) -> None:
+    """The simulated sync detections at ``time`` [s since 1970 UTC] as a YAPS table ``d.csv`` in ``order``, and the
+    receivers table ``h.csv`` (receiver ``Rj`` with sync tag ``Sj``)."""
     epo = np.floor(time[order]).astype(np.int64)
     names = np.array([f"R{j}" for j in range(N)])
     pd.DataFrame({"epo": epo, "frac": [f"{v:.9f}" for v in np.clip(time[order] - epo, 0, 0.999999999)],
@@ -35,6 +30,16 @@ def season(tmp_path_factory):
                   "serial": names[sim.receiver][order]}).to_csv(folder / "d.csv", index=False)
     pd.DataFrame({"serial": names, "sync_tag": [f"S{j}" for j in range(N)], "x_m": sim.positions[:, 0],
                   "y_m": sim.positions[:, 1]}).to_csv(folder / "h.csv", index=False)
+
+
+@pytest.fixture(scope="module")
+def season(tmp_path_factory):
+    """5 days of a simulated array of 6 receivers (sync tags every 20 to 30 min) as a YAPS table and a receivers
+    table, synchronised in windows of 2 days and in one fit."""
+    folder = tmp_path_factory.mktemp("season")
+    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=5, side=700.0, interval=(1200.0, 1800.0))
+    time = sim.time + EPOCH
+    _write(folder, sim, time, np.argsort(time, kind="stable"))
     said = {}
     for days in ("2", "0"):
         out = folder / f"sync{days}"
@@ -85,14 +90,7 @@ def test_a_clock_reset_in_the_files_order_at_a_windows_edge(tmp_path, capsys):
                         jump=(2, 2 * 86400.0, -3000.0))
     tau = sim.true_time(sim.receiver, sim.time, sim.after)
     time = sim.reading(sim.receiver, tau) + EPOCH
-    order = np.lexsort((tau, sim.receiver))  # each receiver's rows as it logged them
-    epo = np.floor(time[order]).astype(np.int64)
-    names = np.array([f"R{j}" for j in range(N)])
-    pd.DataFrame({"epo": epo, "frac": [f"{v:.9f}" for v in np.clip(time[order] - epo, 0, 0.999999999)],
-                  "tag": np.array([f"S{i}" for i in sim.tag])[order],
-                  "serial": names[sim.receiver][order]}).to_csv(tmp_path / "d.csv", index=False)
-    pd.DataFrame({"serial": names, "sync_tag": [f"S{j}" for j in range(N)], "x_m": sim.positions[:, 0],
-                  "y_m": sim.positions[:, 1]}).to_csv(tmp_path / "h.csv", index=False)
+    _write(tmp_path, sim, time, np.lexsort((tau, sim.receiver)))  # each receiver's rows as it logged them
     said = []
     for days in ("1", "0"):
         assert main(["sync", str(tmp_path / "d.csv"), "--receivers", str(tmp_path / "h.csv"), "--sound-speed",
