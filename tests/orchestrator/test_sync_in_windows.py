@@ -7,6 +7,7 @@ leave-one-out the same tags within a tenth of their median error; a window outsi
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -85,8 +86,9 @@ def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(seaso
 def test_a_clock_reset_in_the_files_order_at_a_windows_edge(tmp_path, capsys):
     """Receiver R2's time going back 3000 s at day 2 of 5 (a reset at a download, its rows in the order it logged
     them: a clock part of the reader's), at the edge of windows of 1 day: the same break said, the same clock
-    segments and parts in ``offsets.csv``, every sync arrival's synchronised time within 0.1 ms of one fit's."""
-    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=21, side=700.0, interval=(600.0, 900.0),
+    segments and parts in ``offsets.csv``, every sync arrival's synchronised time within 0.1 ms of one fit's (the
+    jump's sigma each fit's own)."""
+    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=21, side=700.0, interval=(900.0, 1500.0),
                         jump=(2, 2 * 86400.0, -3000.0))
     tau = sim.true_time(sim.receiver, sim.time, sim.after)
     time = sim.reading(sim.receiver, tau) + EPOCH
@@ -97,7 +99,9 @@ def test_a_clock_reset_in_the_files_order_at_a_windows_edge(tmp_path, capsys):
                      str(sim.sound_speed), "--reference", "R0", "--window-days", days, "--out",
                      str(tmp_path / days)]) == 0
         said.append([line for line in capsys.readouterr().err.splitlines() if "clock break" in line])
-    assert len(said[0]) == 1 and said[0] == said[1] and "goes back" in said[0][0]
+    assert len(said[0]) == len(said[1]) == 1 and "goes back" in said[0][0]
+    plain = [re.sub(r"± [0-9.]+ ms", "", lines[0]) for lines in said]  # the jump's sigma: each fit's own
+    assert plain[0] == plain[1]
     a, b = read_clocks(tmp_path / "1"), read_clocks(tmp_path / "0")
     assert list(a.owner) == list(b.owner) == [0, 1, 2, 2, 3, 4, 5] and list(a.parts) == list(b.parts)
     assert np.allclose(a.spans, b.spans)
