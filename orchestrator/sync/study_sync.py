@@ -22,7 +22,7 @@ from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
-from sblsim.orchestrator.store.read import read_any
+from sblsim.orchestrator.store.read import is_store, read_any
 from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
 
 
@@ -72,8 +72,8 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
                       refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
                       frame: str | None = None, window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """``sblsim sync``'s synchronisation from its files (:func:`sblsim.orchestrator.commands.sync.sync`'s arguments,
-    checked): the deployments read (in ``crs``, projected to ``frame``), the detections (in ``format``; None: from the
-    file's first line; of a store, the deployments' sync tags' rows alone) and the sound-speed series where given,
+    checked): the detections read (in ``format``; None: from the file's first line) and the deployments (in ``crs``,
+    projected to ``frame``); of a store, the deployments' sync tags' rows alone; the sound-speed series where given,
     synchronised (:func:`synchronise_study`), the table's positions checked against the sync tags' clock-free travel
     times first
     (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`, once the arrivals are grouped, before the
@@ -85,9 +85,13 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
         One line: a file refused by its reader, a synchronisation that cannot be made, the table's positions in
         another unit than metres (feet, kilometres, degrees, ...), times rounded too coarsely for the array.
     """
+    # a file read (or refused) first, before the deployments load their geodesy; of a store, the deployments' sync
+    # tags' rows alone: a season's other detections are never read
+    store = is_store(detections)
+    data = None if store else read_any(detections, format)
     deployments = read_deployments(receivers, crs, frame)
-    # of a store, the deployments' sync tags' rows alone: a season's other detections are never read
-    data = read_any(detections, format, tags=set(deployments.table["sync_tag"]) - {""})
+    if store:
+        data = read_any(detections, format, tags=set(deployments.table["sync_tag"]) - {""})
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     # the table's positions against the sync tags' clock-free travel times (another unit refused, a table slightly
     # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)
