@@ -83,7 +83,8 @@ def test_a_fortnight_in_windows_as_one_fit():
     assert np.isfinite(windowed.knots[1:, inner]).all() and np.isfinite(windowed.drift[1:]).all()
 
 
-@pytest.mark.parametrize("day", [6.0, 6.02, 5.97])
+@pytest.mark.parametrize("day", [6.0, pytest.param(6.02, marks=pytest.mark.slow),
+                                 pytest.param(5.97, marks=pytest.mark.slow)])
 def test_a_break_at_a_windows_edge_found_once(day):
     """Over 7 days, receiver 2's clock jumping +0.5 s at a window's edge (day 6, the second window's end; 30 min
     after it, 45 min before it), inside both windows' fits: one break found, at receiver 2, its size within 0.5 ms, its

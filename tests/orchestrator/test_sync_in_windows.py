@@ -83,6 +83,7 @@ def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(seaso
         assert code == 2 and "--window-days" in err and "[0, 366]" in err and not (tmp_path / f"r{days}").exists()
 
 
+@pytest.mark.slow
 def test_a_clock_reset_in_the_files_order_at_a_windows_edge(tmp_path, capsys):
     """Receiver R2's time going back 3000 s at day 2 of 5 (a reset at a download, its rows in the order it logged
     them: a clock part of the reader's), at the edge of windows of 1 day: the same break said, the same clock
