@@ -15,12 +15,24 @@ def reset_peak() -> bool:
         return False
 
 
-def peak_bytes() -> int:
-    """The process's resident high-water mark [bytes] (``VmHWM``, else ``ru_maxrss``)."""
+def _status(key: str) -> int | None:
+    """A memory figure of this process's ``/proc/self/status`` (``VmHWM``, ``VmRSS``) [bytes]; None off Linux."""
     try:
         for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
+            if line.startswith(f"{key}:"):
                 return int(line.split()[1]) * 1024
     except OSError:
         pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return None
+
+
+def peak_bytes() -> int:
+    """The process's resident high-water mark [bytes]: ``VmHWM`` (its own: ``ru_maxrss`` of a spawned process carries
+    its parent's, kept across fork and exec), else ``ru_maxrss``."""
+    peak = _status("VmHWM")
+    return peak if peak is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def resident_bytes() -> int:
+    """The process's resident memory now [bytes] (``VmRSS``; 0 off Linux)."""
+    return _status("VmRSS") or 0

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
+
+from bench_memory import peak_bytes
 
 import sblsim
 from sblsim.models.declarations import ModelError
@@ -39,16 +40,8 @@ TARGET_PEAK_GIB = 1.0
 
 
 def _peak_gib() -> float:
-    """This process's peak resident memory [GiB]: Linux's ``VmHWM`` (its own memory's high-water mark: ru_maxrss
-    would carry the parent's, kept across fork and exec), else ru_maxrss [KiB]."""
-    try:
-        with open("/proc/self/status") as handle:
-            for line in handle:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 2**20
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    """This process's peak resident memory [GiB] (:func:`bench_memory.peak_bytes`: its own high-water mark)."""
+    return peak_bytes() / 2**30
 
 
 def _whole(path: str) -> dict:

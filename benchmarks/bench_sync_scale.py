@@ -44,7 +44,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from bench_memory import peak_bytes, reset_peak  # noqa: E402
+from bench_memory import peak_bytes, reset_peak, resident_bytes  # noqa: E402
 
 #: The issue's targets for a month of 70 receivers on one core: seconds and bytes.
 TARGET_S = 300.0
@@ -125,15 +125,6 @@ def inputs(sim: Simulated, table: np.ndarray | None = None):
     table = sim.positions if table is None else table
     hydrophones = pd.DataFrame({"receiver": names, "sync_tag": tags, "x": table[:, 0], "y": table[:, 1], "z": np.nan})
     return Detections(frame, "simulated", "yaps"), hydrophones
-
-
-def resident_bytes() -> int:
-    """The process's resident memory now [bytes] (Linux; 0 elsewhere)."""
-    try:
-        with open("/proc/self/status") as status:
-            return next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmRSS:"))
-    except (OSError, StopIteration):
-        return 0
 
 
 def measure(n_receivers: int, days: float, seed: int = 1, leave_one_out: bool = True, write: bool = False,
