@@ -308,9 +308,9 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
             bins = own[:-1][np.isin(own[:-1] + 1, own)]  # the window's bins with both edges in its own span
             drift_sigma[out, k0 + bins] = fit.drift_sigma[p.row, bins]
             counts[out, k0 + bins] = fit.counts[p.row, bins]
-            n = max(int(fit.counts[p.row, bins].sum()), 1)
-            scale2[out] += n * fit.scale[p.row] ** 2
-            scale_n[out] += n
+            kept_here = max(int(fit.counts[p.row, bins].sum()), 1)
+            scale2[out] += kept_here * fit.scale[p.row] ** 2
+            scale_n[out] += kept_here
         knots[out] = _filled(knots[out], extend=True)
         knot_sigma[out] = _filled(knot_sigma[out], extend=False)
     scale = np.where(scale_n > 0, np.sqrt(scale2 / np.maximum(scale_n, 1)), np.nan)
