@@ -209,8 +209,8 @@ def execute(chunks: list[Chunk], study: Study, engine: str, fmu_dir, timeseries:
     finally:
         if not ended:  # interrupted (while submitting too) or failed: stop the chunks under way (results dropped)
             stop_pool(pool)
-        else:
-            pool.shutdown(wait=False, cancel_futures=True)
+        else:  # every chunk ended: the idle workers and the management thread joined (none left to race the exit)
+            pool.shutdown(cancel_futures=True)
 
 
 def stop_pool(pool: ProcessPoolExecutor) -> None:
@@ -219,12 +219,14 @@ def stop_pool(pool: ProcessPoolExecutor) -> None:
     the exit would wait for it). The finished chunks are already saved; the stopped ones are recomputed by
     ``--resume``."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it, joined or not
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         if process.is_alive():
             process.terminate()
     for process in processes:
         process.join(timeout=5.0)
-    # the pool's management thread too, now that its processes are gone: left running, it races the interpreter's
-    # exit, whose hook then writes to the pipe it closed ("Exception ignored ... Bad file descriptor")
-    pool.shutdown(wait=True)
+    # the pool's management thread too, now that its processes are gone: left running, it closes its wake-up pipe
+    # while the interpreter's exit hook writes to it ("Exception ignored in: <module 'threading'> ... _python_exit")
+    if manager is not None and manager.is_alive():
+        manager.join(timeout=5.0)
