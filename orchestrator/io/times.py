@@ -29,6 +29,11 @@ if TYPE_CHECKING:  # pandas is imported when a function runs (the commands' modu
 ISO_TIME = re.compile(r"[0-9]{4}-[0-9]{2}-[0-9]{2}"
                       r"(?:[T ][0-9]{2}:[0-9]{2}(?::[0-9]{2}(?:[.,][0-9]{1,9})?)?)?"
                       r"(?: ?(?:Z|UTC|[+-][0-9]{2}(?::?[0-9]{2})?))?")
+#: The ISO 8601 times pandas parses as they are (:data:`ISO_TIME` without a decimal comma, ``UTC`` or a space before
+#: the zone, which are normalised first).
+PLAIN_TIME = re.compile(r"[0-9]{4}-[0-9]{2}-[0-9]{2}"
+                        r"(?:[T ][0-9]{2}:[0-9]{2}(?::[0-9]{2}(?:\.[0-9]{1,9})?)?)?"
+                        r"(?:Z|[+-][0-9]{2}(?::?[0-9]{2})?)?")
 #: Epoch seconds: a plain decimal number (no exponent, no sign: 1970 onwards).
 EPOCH = re.compile(r"[0-9]{1,11}(?:\.[0-9]{0,9})?")
 #: The latest time allowed [s since 1970-01-01 UTC]: 2262-04-11T23:47:16Z, the latest whole second pandas' timestamps
@@ -59,7 +64,9 @@ def is_epoch(cells: pd.Series) -> bool:
     """Whether a column's non-empty cells are all epoch seconds (else they must all be ISO 8601)."""
     text = cells.astype(str).str.strip()
     text = text[text != ""]
-    return bool(len(text)) and bool(text.str.fullmatch(EPOCH.pattern).all())
+    if not len(text) or not EPOCH.fullmatch(text.iloc[0]):  # the first not epoch seconds: the column is not
+        return False
+    return bool(text.str.fullmatch(EPOCH.pattern).all())
 
 
 def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[int], column: str,
@@ -100,20 +107,20 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
     if empty.any() and not missing:
         k = int(np.flatnonzero(empty)[0])
         raise _refuse(where, lines[k], column, "", ALLOWED)
-    given = text[~empty]
+    given = text[~empty] if empty.any() else text
     seconds = np.full(len(text), np.nan)
     if not len(given):
         return seconds
     if is_epoch(given):
         values = pd.to_numeric(given, errors="coerce").to_numpy(float)
     else:
-        iso = given.str.fullmatch(ISO_TIME.pattern).to_numpy(bool)
-        if not iso.all():
-            k = int(given.index[np.flatnonzero(~iso)[0]])
-            allowed = ALLOWED + (" (one form per column)" if given.str.fullmatch(EPOCH.pattern).any() else "")
-            raise _refuse(where, lines[k], column, text[k], allowed)
         normal = given
-        if given.str.contains(r",|UTC$|[0-9] [Z+-]", regex=True).any():  # else nothing to replace: no cell's pass
+        if not given.str.fullmatch(PLAIN_TIME.pattern).all():  # else every cell ISO 8601 as pandas parses it
+            iso = given.str.fullmatch(ISO_TIME.pattern).to_numpy(bool)
+            if not iso.all():
+                k = int(given.index[np.flatnonzero(~iso)[0]])
+                allowed = ALLOWED + (" (one form per column)" if given.str.fullmatch(EPOCH.pattern).any() else "")
+                raise _refuse(where, lines[k], column, text[k], allowed)
             normal = given.str.replace(",", ".", regex=False).str.replace(r" ?UTC$", "Z", regex=True)
             normal = normal.str.replace(r"(?<=[0-9]) (?=[Z+-])", "", regex=True)
         stamps = pd.to_datetime(normal, format="ISO8601", utc=True, errors="coerce")
@@ -170,5 +177,5 @@ def parse_instant(value: str | float | int, where: str) -> float:
         raise ModelError(f"{where}: {text[:40]!r} is not allowed; allowed: {ALLOWED}") from None
 
 
-__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "TIME_SPAN", "is_epoch", "iso_utc", "parse_instant",
-           "utc_seconds"]
+__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "PLAIN_TIME", "TIME_SPAN", "is_epoch", "iso_utc",
+           "parse_instant", "utc_seconds"]

@@ -209,11 +209,36 @@ def refuse(what: str, name: str, line: int, column: str, text: str, allowed: str
     return ModelError(f"{what}: {name!r} line {line} column {column}: {shown!r} is not allowed; allowed: {allowed}")
 
 
+def per_value(cells: pd.Series, function):
+    """``function`` of a column (a map of each cell alone: a pattern's match, a part of the text) computed once for
+    each distinct cell where they repeat (a detections file's receivers and transmitters: a few hundred names in a
+    million rows), else over the column; the result in the column's order and index.
+
+    Parameters
+    ----------
+    cells : pandas.Series
+        (n,) the column.
+    function : callable
+        A Series of cells to a Series (or a DataFrame) of as many results, each of its cell alone.
+    """
+    codes, distinct = pd.factorize(cells, use_na_sentinel=False)
+    if len(distinct) * 8 > len(cells):
+        return function(cells)
+    done = function(pd.Series(distinct, dtype=cells.dtype)).take(codes)
+    done.index = cells.index
+    return done
+
+
 def pattern(values: pd.Series, regex: re.Pattern, what: str, name: str, lines: list[int], column: str,
             allowed: str) -> pd.Series:
-    """The stripped cells of one column, each matching ``regex`` (else the first bad one refused)."""
-    cells = values.astype(str).str.strip()
-    bad = ~cells.str.fullmatch(regex.pattern).fillna(False).to_numpy(bool)
+    """The stripped cells of one column, each matching ``regex`` (else the first bad one refused); each distinct
+    cell matched once (:func:`per_value`)."""
+    def checked(v: pd.Series) -> pd.DataFrame:
+        stripped = v.astype(str).str.strip()
+        return pd.DataFrame({"cells": stripped, "ok": stripped.str.fullmatch(regex.pattern).fillna(False)})
+
+    both = per_value(values, checked)
+    cells, bad = both["cells"], ~both["ok"].to_numpy(bool)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise refuse(what, name, lines[k], column, cells.iloc[k], allowed)
@@ -307,5 +332,5 @@ def shown_header(header: list[str]) -> str:
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "read_text", "refuse",
-           "shown_header", "text_table", "too_large", "units_row"]
+__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "per_value", "read_text",
+           "refuse", "shown_header", "text_table", "too_large", "units_row"]

@@ -133,8 +133,8 @@ def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name:
                      "a receiver's serial of 1 to 40 letters, digits, '.' or '_'")
     tag = pattern(body[index["full id"]], TRANSMITTER, what, name, lines, "Full ID",
                   "a transmitter's full ID CODESPACE-ID, e.g. A69-1602-4555")
-    frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(),
-                          "code_space": before_last_dash(tag), "time": time})
+    frame = pd.DataFrame({"receiver": serial.array, "tag": tag.array, "code_space": before_last_dash(tag).array,
+                          "time": time})
     if index["sensor value"] is not None:
         frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
             body, index["sensor value"], index["sensor unit"], header, lines, name, what)

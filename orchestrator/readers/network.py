@@ -19,7 +19,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, pattern, refuse, shown_header, units_row
+from sblsim.orchestrator.readers.cells import column, pattern, per_value, refuse, shown_header, units_row
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import (
     CODE_SPACE,
@@ -85,12 +85,13 @@ def extract(header: list[str], body: pd.DataFrame, lines: list[int], name: str, 
         ident = pattern(body[index["id"]], TAG_ID, what, name, lines, header[index["id"]],
                         "a transmitter's id of 1 to 40 letters, digits, '.' or '_'")
         tag = full_ids(space, ident)
-    frame = pd.DataFrame({"receiver": receiver.to_numpy(), "tag": tag.to_numpy(),
-                          "code_space": before_last_dash(tag), "time": time})
+    frame = pd.DataFrame({"receiver": receiver.array, "tag": tag.array, "code_space": before_last_dash(tag).array,
+                          "time": time})
     frame["sensor_value"], frame["sensor_unit"] = sensor_columns(body, index["value"], index["unit"], header, lines,
                                                                  name, what)
     if index["station"] is not None:
-        frame["station"] = body[index["station"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+        frame["station"] = per_value(body[index["station"]],
+                                     lambda v: v.astype(str).str.strip().str.slice(0, 80)).array
     if (note != "").any():
         frame["receiver_note"] = note
     frame["line"] = np.asarray(lines, np.int64)
@@ -100,8 +101,8 @@ def extract(header: list[str], body: pd.DataFrame, lines: list[int], name: str, 
 def annotated(cells: pd.Series) -> tuple[pd.Series, np.ndarray]:
     """A receiver column's cells with a note in brackets after the serial (``5321(lost/found)``) split: the cells
     without it (stripped), and each note (``""`` where none)."""
-    cells = cells.astype(str).str.strip()
-    parts = cells.str.fullmatch(ANNOTATED.pattern).fillna(False).to_numpy(bool)
+    cells = per_value(cells, lambda v: v.astype(str).str.strip())
+    parts = per_value(cells, lambda v: v.str.fullmatch(ANNOTATED.pattern).fillna(False)).to_numpy(bool)
     note = np.full(len(cells), "", dtype=object)
     if parts.any():
         found = cells[parts].str.extract(ANNOTATED.pattern)

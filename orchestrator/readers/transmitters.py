@@ -13,10 +13,10 @@ from __future__ import annotations
 import re
 from typing import Iterable
 
-import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.readers.cells import per_value
 
 #: A full transmitter ID: a code space of one to three parts (``A69-1602``, ``R64K``, ``A180-1702``) and an id.
 FULL_ID = re.compile(r"(?:[A-Za-z0-9._]{1,20}-){1,3}[A-Za-z0-9._]{1,40}")
@@ -34,16 +34,16 @@ def split(name: str) -> tuple[str, str]:
     return space, ident
 
 
-def before_last_dash(cells: pd.Series) -> np.ndarray:
+def before_last_dash(cells: pd.Series) -> pd.Series:
     """Each cell's text before its last ``-`` (``""`` for none): a transmitter's code space (:func:`split`'s first
-    part), a ``MODEL-SERIAL`` receiver's model; one regular expression over the column (pyarrow's, not a Python
-    call a cell)."""
-    return cells.str.replace(r"-?[^-]*$", "", regex=True).to_numpy()
+    part), a ``MODEL-SERIAL`` receiver's model; one regular expression over the column's distinct cells (pyarrow's,
+    not a Python call a cell: :func:`~.cells.per_value`), in the column's order and index."""
+    return per_value(cells, lambda v: v.str.replace(r"-?[^-]*$", "", regex=True))
 
 
 def after_last_dash(cells: pd.Series) -> pd.Series:
     """Each cell's text after its last ``-`` (the whole cell for none): a ``MODEL-SERIAL`` receiver's serial."""
-    return cells.str.replace(r"^.*-", "", regex=True)
+    return per_value(cells, lambda v: v.str.replace(r"^.*-", "", regex=True))
 
 
 def full_ids(space: pd.Series, ident: pd.Series) -> pd.Series:

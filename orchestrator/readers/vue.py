@@ -13,7 +13,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import pattern
+from sblsim.orchestrator.readers.cells import pattern, per_value
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER, after_last_dash, before_last_dash
 
@@ -43,13 +43,14 @@ def vue(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what
                         "a receiver as MODEL-SERIAL, e.g. VR2W-128355")
     transmitter = pattern(body[index["transmitter"]], TRANSMITTER, what, name, lines, header[index["transmitter"]],
                            "a transmitter as CODESPACE-ID, e.g. A69-1602-59335")
-    frame = pd.DataFrame({"receiver": after_last_dash(receiver).to_numpy(), "tag": transmitter.to_numpy(),
-                          "code_space": before_last_dash(transmitter), "time": seconds})
+    frame = pd.DataFrame({"receiver": after_last_dash(receiver).array, "tag": transmitter.array,
+                          "code_space": before_last_dash(transmitter).array, "time": seconds})
     frame["sensor_value"], frame["sensor_unit"] = sensor_columns(
         body, index["sensor value"], index["sensor unit"], header, lines, name, what)
-    frame["receiver_model"] = before_last_dash(receiver)
+    frame["receiver_model"] = before_last_dash(receiver).array
     if index["station name"] is not None:
-        frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+        frame["station"] = per_value(body[index["station name"]],
+                                     lambda v: v.astype(str).str.strip().str.slice(0, 80)).array
     used = {when} | {k for k in index.values() if k is not None}
     return frame, used
 

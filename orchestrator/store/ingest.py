@@ -31,6 +31,7 @@ import json
 import shutil
 import time as clock
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterator
 
@@ -59,6 +60,7 @@ from sblsim.orchestrator.readers.detections import (
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
+from sblsim.orchestrator.store.plain import plain_body
 
 #: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: reading a VUE export, a
 #: Fathom CSV or a GLATOS extract peaked at 0.31-0.33 GiB with it, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
@@ -88,33 +90,42 @@ class ClockParts:
         self.resets: list[dict] = []
 
     def add(self, frame: pd.DataFrame) -> None:
-        """Set ``frame["clock_part"]`` (in place) for a piece's rows, in the file's order."""
-        receiver = frame["receiver"].to_numpy(dtype=object)
+        """Set ``frame["clock_part"]`` (in place) for a piece's rows, in the file's order (each receiver's rows found
+        by its code: numpy's passes, not a group's Python objects)."""
         time = frame["time"].to_numpy(float)
         lines = frame["line"].to_numpy(np.int64)
-        group = frame.groupby("receiver", sort=False)
-        before = group["time"].shift().to_numpy(float, copy=True)
-        before_line = group["line"].shift().to_numpy(float, copy=True)
-        first = np.flatnonzero(np.isnan(before))
-        for k in first:
-            last = self.last.get(receiver[k])
-            if last is not None:
-                before[k], before_line[k] = last
+        codes, names = pd.factorize(frame["receiver"])
+        names = [str(r) for r in names]
+        n = len(frame)
+        order = np.argsort(codes, kind="stable")  # each receiver's rows together, in the file's order
+        sorted_codes = codes[order]
+        starts = np.flatnonzero(np.r_[True, sorted_codes[1:] != sorted_codes[:-1]])
+        ends = np.r_[starts[1:], n] - 1
+        before, before_line = np.empty(n), np.empty(n)
+        before[order[1:]], before_line[order[1:]] = time[order[:-1]], lines[order[:-1]]
+        for g, k in zip(sorted_codes[starts], order[starts]):  # a receiver's first row: its last row before
+            before[k], before_line[k] = self.last.get(names[g], (np.nan, np.nan))
         step = time - before
         back = np.flatnonzero(step < -CLOCK_TOLERANCE)
-        reset = np.zeros(len(frame), np.int64)
+        reset = np.zeros(n, np.int64)
         reset[back] = 1
-        base = frame["receiver"].map(self.part).fillna(1).to_numpy(np.int64)
-        part = pd.Series(reset).groupby(receiver, sort=False).cumsum().to_numpy() + base
+        counted = np.cumsum(reset[order])
+        base = np.array([self.part.get(r, 1) for r in names], np.int64)
+        part = np.empty(n, np.int64)
+        part[order] = counted - np.repeat(counted[starts] - reset[order[starts]], ends - starts + 1) + \
+            base[sorted_codes]
         frame["clock_part"] = part
+        receiver = np.asarray(names, dtype=object)[codes]
         self.resets += [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(before_line[k]),
                          "step_s": float(step[k]), "before_s": float(before[k]), "after_s": float(time[k]),
                          "clock_part": int(part[k])} for k in back]
-        for (r, p), tags in frame.groupby(["receiver", "clock_part"], sort=False)["tag"].unique().items():
-            self.tags.setdefault((r, int(p)), set()).update(tags)
-        ends = frame.drop_duplicates("receiver", keep="last")
-        for r, t, line, p in zip(ends["receiver"], ends["time"], ends["line"], ends["clock_part"]):
-            self.last[r], self.part[r] = (float(t), int(line)), int(p)
+        tag_codes, tags = pd.factorize(frame["tag"])
+        span = int(part.max()) + 1
+        for key in pd.unique((codes.astype(np.int64) * span + part) * len(tags) + tag_codes):  # each (r, p, tag)
+            (g, p), t = divmod(int(key) // len(tags), span), int(key) % len(tags)
+            self.tags.setdefault((names[g], p), set()).add(tags[t])
+        for g, k in zip(sorted_codes[starts], order[ends]):
+            self.last[names[g]], self.part[names[g]] = (float(time[k]), int(lines[k])), int(part[k])
 
     def finish(self) -> list[dict]:
         """The resets in the file's order (:attr:`~sblsim.orchestrator.readers.detections.Detections.clock_resets`).
@@ -136,7 +147,8 @@ class ClockParts:
 
 def _breaks(data: bytes) -> int:
     """The line breaks in ``data`` (``\\n``, ``\\r\\n`` or a lone ``\\r``, as pandas ends a row)."""
-    return data.count(b"\n") + data.count(b"\r") - data.count(b"\r\n")
+    breaks = data.count(b"\n")
+    return breaks + data.count(b"\r") - data.count(b"\r\n") if b"\r" in data else breaks
 
 
 def _cut(data: bytes, fathom_file: bool) -> int:
@@ -146,15 +158,17 @@ def _cut(data: bytes, fathom_file: bool) -> int:
     if fathom_file:
         det = max(data.rfind(b"\nDET,", 0, end), data.rfind(b'\n"DET",', 0, end))
         end = det + 1 if det > 0 else end
-    while end > 0 and data.count(b'"', 0, end) % 2:
+    while end > 0 and b'"' in data and data.count(b'"', 0, end) % 2:
         end = data.rfind(b"\n", 0, end - 1) + 1
     return end
 
 
-def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2) -> Iterator[tuple[bytes, int]]:
+def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2, *, check: bool = True
+           ) -> Iterator[tuple[bytes, int]]:
     """The pieces of a file from where ``handle`` stands (after its header; ``line``: the number of the next line),
     each cut by :func:`_cut`, with the number of its first line in the file; each checked as the whole-file reader
-    checks its text (no NUL byte, its lines' lengths and cells).
+    checks its text (no NUL byte; with ``check``, its lines' lengths and cells: else the caller's to check, as
+    :func:`_frames` does of a piece not :mod:`.plain`).
 
     Raises
     ------
@@ -179,7 +193,8 @@ def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2
         nul = piece.find(b"\0")
         if nul >= 0:
             raise not_text(name, _WHAT, piece, nul)
-        check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
+        if check:
+            check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
         yield piece, line
         line += _breaks(piece)
         if ended:
@@ -229,7 +244,8 @@ def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: 
 
 def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress
             ) -> Iterator[tuple[pd.DataFrame, list[str], set[int]]]:
-    """Each piece's detections (the format's reader), its header and the header's columns used."""
+    """Each piece's detections (the format's reader), its header and the header's columns used; a piece of a
+    table of one row a line, UTF-8 and :mod:`.plain`, parsed by Arrow's CSV reader, every other by the text reader."""
     name = str(path)
     with open(path, "rb") as handle:
         first = handle.readline(MAX_LINE_BYTES + 2)
@@ -237,22 +253,31 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
         check_cells(first, name, _WHAT)
         head = _decoded(first, encoding + ("-sig" if encoding == "utf-8" else "")).rstrip("\r\n")
         descs: dict[str, str] = {}
-        for piece, line in pieces(handle, name, piece_bytes, format == "fathom"):
+        header = text_table(head, name, _WHAT, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)[0] \
+            if format != "fathom" and encoding == "utf-8" else None
+        for piece, line in pieces(handle, name, piece_bytes, format == "fathom", check=False):
             digest.update(piece)
             progress.update(len(piece))
+            read = plain_body(piece, len(header), line) if header is not None else None
+            if read is not None:
+                body, lines = read
+                frame, used = rows_read(format, header, body, lines, name, _WHAT)
+                yield frame, header, used
+                continue
+            check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
             text = _decoded(piece, encoding)
             if format == "fathom":
                 table = _fathom_piece(head, descs, text, line, name)
                 if table is None:
                     continue
-                header, body, lines = table
+                header_read, body, lines = table
             else:
-                header, body, lines = text_table(head + "\n" + text, name, _WHAT, MAX_DETECTIONS, first_line=line - 1,
-                                                 max_cells=MAX_DETECTION_CELLS)
+                header_read, body, lines = text_table(head + "\n" + text, name, _WHAT, MAX_DETECTIONS,
+                                                      first_line=line - 1, max_cells=MAX_DETECTION_CELLS)
             if not len(body):
                 continue
-            frame, used = rows_read(format, header, body, lines, name, _WHAT)
-            yield frame, header, used
+            frame, used = rows_read(format, header_read, body, lines, name, _WHAT)
+            yield frame, header_read, used
 
 
 def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
@@ -262,19 +287,24 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
     tags: Counter = Counter()
     receivers: Counter = Counter()
     rows, span, ignored, files, columns = 0, [np.inf, -np.inf], None, 0, []
-    for frame, header, used in _frames(path, format, encoding, piece_bytes, digest, progress):
-        if clocks is not None:
-            clocks.add(frame)
-        columns = merged_columns(columns, list(frame.columns))
-        if ignored is None:
-            ignored = [h for k, h in enumerate(header) if k not in used and h]
-        tags.update(frame["tag"].value_counts().to_dict())
-        receivers.update(frame["receiver"].value_counts().to_dict())
-        rows += len(frame)
-        span = [min(span[0], float(frame["time"].min())), max(span[1], float(frame["time"].max()))]
-        table = pa.Table.from_pandas(frame.sort_values(["tag", "line"], kind="stable"), preserve_index=False)
-        pq.write_table(table, folder / f"part-{files:05d}.parquet", row_group_size=ROW_GROUP, compression="zstd")
-        files += 1
+    with ThreadPoolExecutor(1) as writer:  # a piece written while the next is read (Arrow's writing frees the GIL)
+        written = None
+        for frame, header, used in _frames(path, format, encoding, piece_bytes, digest, progress):
+            if clocks is not None:
+                clocks.add(frame)
+            columns = merged_columns(columns, list(frame.columns))
+            if ignored is None:
+                ignored = [h for k, h in enumerate(header) if k not in used and h]
+            tags.update(frame["tag"].value_counts().to_dict())
+            receivers.update(frame["receiver"].value_counts().to_dict())
+            rows += len(frame)
+            span = [min(span[0], float(frame["time"].min())), max(span[1], float(frame["time"].max()))]
+            if written is not None:
+                written.result()  # one piece in writing at a time: the memory of two pieces at most
+            written = writer.submit(_write_part, frame, folder / f"part-{files:05d}.parquet")
+            files += 1
+        if written is not None:
+            written.result()
     if not rows:
         raise ModelError(f"{_WHAT}: {str(path)!r} holds a header and no detections")
     resets = clocks.finish() if clocks is not None else []
@@ -284,6 +314,14 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
             "files": files, "columns": columns, "time_span_s": span, "ignored_columns": ignored or [],
             "clock_resets": resets,
             "tags": dict(sorted(tags.items())), "receivers": dict(sorted(receivers.items()))}
+
+
+def _write_part(frame: pd.DataFrame, path: Path) -> None:
+    """A piece's detections written as one Parquet file, its rows by tag, then line (the module docstring)."""
+    codes, _ = pd.factorize(frame["tag"], sort=True)
+    order = np.lexsort((frame["line"].to_numpy(np.int64), codes))
+    table = pa.Table.from_pandas(frame, preserve_index=False).take(order)
+    pq.write_table(table, path, row_group_size=ROW_GROUP, compression="zstd")
 
 
 def merged_columns(known: list[str], more: list[str]) -> list[str]:
