@@ -229,6 +229,12 @@ def per_value(cells: pd.Series, function):
     return done
 
 
+def trimmed(cells: pd.Series, most: int):
+    """A column's cells stripped and cut to ``most`` characters (a receiver's model, a station's name), each distinct
+    cell once (:func:`per_value`), as an array in the column's order."""
+    return per_value(cells, lambda v: v.astype(str).str.strip().str.slice(0, most)).array
+
+
 def pattern(values: pd.Series, regex: re.Pattern, what: str, name: str, lines: list[int], column: str,
             allowed: str) -> pd.Series:
     """The stripped cells of one column, each matching ``regex`` (else the first bad one refused); each distinct
@@ -333,4 +339,4 @@ def shown_header(header: list[str]) -> str:
 
 
 __all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "per_value", "read_text",
-           "refuse", "shown_header", "text_table", "too_large", "units_row"]
+           "refuse", "shown_header", "text_table", "too_large", "trimmed", "units_row"]

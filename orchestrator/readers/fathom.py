@@ -25,7 +25,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table, too_large
+from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table, too_large, trimmed
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, before_last_dash
 
@@ -141,10 +141,9 @@ def _fathom_table(header: list[str], body: pd.DataFrame, lines: list[int], name:
     else:  # format 2's DET: a sensor tag's raw value
         frame["sensor_value"], _ = sensor_columns(body, index["raw data"], None, header, lines, name, what)
         frame["sensor_unit"] = np.where(np.isfinite(frame["sensor_value"].to_numpy(float)), "raw", "")
-    frame["receiver_model"] = "" if index["model"] is None else \
-        body[index["model"]].astype(str).str.strip().str.slice(0, 40).to_numpy()
+    frame["receiver_model"] = "" if index["model"] is None else trimmed(body[index["model"]], 40)
     if index["station name"] is not None:
-        frame["station"] = body[index["station name"]].astype(str).str.strip().str.slice(0, 80).to_numpy()
+        frame["station"] = trimmed(body[index["station name"]], 80)
     return frame, {k for k in index.values() if k is not None} | {0}
 
 
@@ -155,7 +154,7 @@ def fathom(header: list[str], body: pd.DataFrame, lines: list[int], name: str, w
     frame, used = _fathom_table(header, body, lines, name, what)
     frame["line"] = lines
     sensors = body.attrs.get("sensors")
-    if sensors is not None:
+    if sensors is not None and len(sensors[1]):  # (an empty table's merge would make the columns objects)
         extra, _ = _fathom_table(*sensors, name, what)
         extra["line"] = sensors[2]
         keys = ["time", "receiver", "tag"]
@@ -166,6 +165,7 @@ def fathom(header: list[str], body: pd.DataFrame, lines: list[int], name: str, w
         frame.loc[at, "sensor_unit"] = both["sensor_unit_sens"].to_numpy()
         alone = extra.merge(frame[keys], on=keys, how="left", indicator=True)
         alone = alone[alone["_merge"] == "left_only"].drop(columns="_merge")
+        alone = alone.assign(**{c: "" for c in frame.columns if c not in alone})  # a station DET_SENS lacks: none
         frame = pd.concat([frame, alone], ignore_index=True).sort_values("line", kind="stable")
     return frame.reset_index(drop=True), used
 

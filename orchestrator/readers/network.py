@@ -19,7 +19,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, pattern, per_value, refuse, shown_header, units_row
+from sblsim.orchestrator.readers.cells import column, pattern, per_value, refuse, shown_header, trimmed, units_row
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import (
     CODE_SPACE,
@@ -90,8 +90,7 @@ def extract(header: list[str], body: pd.DataFrame, lines: list[int], name: str, 
     frame["sensor_value"], frame["sensor_unit"] = sensor_columns(body, index["value"], index["unit"], header, lines,
                                                                  name, what)
     if index["station"] is not None:
-        frame["station"] = per_value(body[index["station"]],
-                                     lambda v: v.astype(str).str.strip().str.slice(0, 80)).array
+        frame["station"] = trimmed(body[index["station"]], 80)
     if (note != "").any():
         frame["receiver_note"] = note
     frame["line"] = np.asarray(lines, np.int64)

@@ -13,7 +13,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import pattern, per_value
+from sblsim.orchestrator.readers.cells import pattern, trimmed
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER, after_last_dash, before_last_dash
 
@@ -49,8 +49,7 @@ def vue(header: list[str], body: pd.DataFrame, lines: list[int], name: str, what
         body, index["sensor value"], index["sensor unit"], header, lines, name, what)
     frame["receiver_model"] = before_last_dash(receiver).array
     if index["station name"] is not None:
-        frame["station"] = per_value(body[index["station name"]],
-                                     lambda v: v.astype(str).str.strip().str.slice(0, 80)).array
+        frame["station"] = trimmed(body[index["station name"]], 80)
     used = {when} | {k for k in index.values() if k is not None}
     return frame, used
 

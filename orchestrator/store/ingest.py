@@ -60,11 +60,14 @@ from sblsim.orchestrator.readers.detections import (
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
-from sblsim.orchestrator.store.plain import plain_body
+from sblsim.orchestrator.store.plain import fathom_detections, plain_body
 
 #: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: reading a VUE export, a
 #: Fathom CSV or a GLATOS extract peaked at 0.31-0.33 GiB with it, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
 PIECE_BYTES = 8 * 2**20
+#: A Fathom CSV's first piece [bytes]: its ``_DESC`` lines, which the text reader reads (the pieces after them, in the
+#: lines' columns, are read by Arrow: :func:`~.plain.fathom_detections`).
+FIRST_FATHOM_BYTES = 2**16
 #: The smallest piece allowed [bytes].
 MIN_PIECE_BYTES = 4096
 #: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
@@ -176,8 +179,10 @@ def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2
         A NUL byte, a line longer than 1 MiB or of too many cells, a quoted cell spanning more than a piece.
     """
     rest = b""
+    size = min(piece_bytes, FIRST_FATHOM_BYTES) if fathom_file else piece_bytes  # its _DESC lines in a piece alone
     while True:
-        data = handle.read(piece_bytes)
+        data = handle.read(size)
+        size = piece_bytes
         ended = not data
         data = rest + data
         if not data:
@@ -242,6 +247,31 @@ def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: 
     return header, body, [k + shift for k in lines]
 
 
+def _fathom_plain(head: str, descs: dict[str, str], known: dict, piece: bytes, line: int, name: str
+                  ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
+    """A plain Fathom piece's ``DET`` table (:func:`~.plain.fathom_detections`, parsed by Arrow) under the
+    ``_DESC`` lines in force, as :func:`_fathom_piece` makes it (the same header; the ``DET_SENS`` table it carries
+    empty); None where the piece is not plain (then read by :func:`_fathom_piece`). ``known``: each set of
+    ``_DESC`` lines' tables without records, kept between pieces."""
+    if "DET" not in descs:
+        return None
+    found = fathom_detections(piece)
+    if found is None:
+        return None
+    carried = tuple(descs[record] for record in fathom.FATHOM_RECORDS if record in descs)
+    if carried not in known:
+        known[carried] = fathom.fathom_records("\n".join([head, *carried]), name, _WHAT, MAX_DETECTIONS,
+                                               MAX_DETECTION_CELLS)
+    header, empty, _ = known[carried]
+    read = plain_body(found[0], len(header), 0)
+    if read is None:
+        return None
+    body, at = read
+    if "sensors" in empty.attrs:
+        body.attrs["sensors"] = empty.attrs["sensors"]
+    return header, body, (found[1][at] + line).tolist()
+
+
 def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress
             ) -> Iterator[tuple[pd.DataFrame, list[str], set[int]]]:
     """Each piece's detections (the format's reader), its header and the header's columns used; a piece of a
@@ -253,16 +283,20 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
         check_cells(first, name, _WHAT)
         head = _decoded(first, encoding + ("-sig" if encoding == "utf-8" else "")).rstrip("\r\n")
         descs: dict[str, str] = {}
+        known: dict = {}
         header = text_table(head, name, _WHAT, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)[0] \
             if format != "fathom" and encoding == "utf-8" else None
         for piece, line in pieces(handle, name, piece_bytes, format == "fathom", check=False):
             digest.update(piece)
             progress.update(len(piece))
-            read = plain_body(piece, len(header), line) if header is not None else None
+            if format == "fathom":
+                read = _fathom_plain(head, descs, known, piece, line, name) if encoding == "utf-8" else None
+            else:
+                read = (header, *found) if header is not None and \
+                    (found := plain_body(piece, len(header), line)) is not None else None
             if read is not None:
-                body, lines = read
-                frame, used = rows_read(format, header, body, lines, name, _WHAT)
-                yield frame, header, used
+                frame, used = rows_read(format, read[0], read[1], read[2], name, _WHAT)
+                yield frame, read[0], used
                 continue
             check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
             text = _decoded(piece, encoding)

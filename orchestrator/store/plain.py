@@ -23,7 +23,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pcsv
 
-from sblsim.orchestrator.io.tables import MAX_LINE_BYTES
+from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, MAX_LINE_CELLS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 
 
@@ -83,4 +83,41 @@ def plain_body(piece: bytes, width: int, first_line: int, max_cells: int = MAX_D
     return body, (np.arange(rows, dtype=np.int64) + first_line).tolist()
 
 
-__all__ = ["plain_body"]
+def fathom_detections(piece: bytes, max_cells: int = MAX_DETECTION_CELLS) -> tuple[bytes, np.ndarray] | None:
+    """A plain piece of a Fathom CSV's records (the module docstring) reduced to its ``DET`` lines, and each one's
+    line in the piece (0 first); None where the piece is not plain, holds no ``DET`` line, or holds a line of a
+    ``DET_…`` record (a ``DET_DESC`` or ``DET_SENS``: read by the text reader). Every line of the piece is checked as
+    :func:`~sblsim.orchestrator.io.tables.check_cells` checks it (its length, its cells, the piece's cells), the
+    lines of other records too.
+
+    Parameters
+    ----------
+    piece : bytes
+        Whole lines of the file, after its first line.
+    max_cells : int
+        The most cells of the piece [1].
+    """
+    if not piece or b'"' in piece or b"\r" in piece or b"\n\n" in piece or piece.startswith(b"\n"):
+        return None
+    data = np.frombuffer(piece + b"\n\0\0\0\0" if not piece.endswith(b"\n") else piece + b"\0\0\0\0", np.uint8)
+    ends = np.flatnonzero(data == ord("\n"))
+    starts = np.r_[0, ends[:-1] + 1]
+    if (ends - starts).max() > MAX_LINE_BYTES:
+        return None
+    at = np.flatnonzero(data[:ends[-1] + 1] == ord(","))
+    commas = np.diff(np.searchsorted(at, ends), prepend=0)  # each line's
+    if commas.max() + 1 > MAX_LINE_CELLS or len(at) + len(starts) > max_cells:
+        return None
+    record = data[starts] == ord("D")
+    for k, byte in enumerate(b"ET"):
+        record &= data[starts + k + 1] == byte
+    if (record & (data[starts + 3] == ord("_"))).any():
+        return None
+    record &= data[starts + 3] == ord(",")
+    if not record.any():
+        return None
+    keep = np.repeat(record, ends - starts + 1)
+    return data[:ends[-1] + 1][keep].tobytes(), np.flatnonzero(record)
+
+
+__all__ = ["fathom_detections", "plain_body"]

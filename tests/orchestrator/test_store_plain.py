@@ -15,9 +15,9 @@ from sblsim.orchestrator.readers.detections import read_detections
 from sblsim.orchestrator.store import ingest as ingest_module
 from sblsim.orchestrator.store import plain
 from sblsim.orchestrator.store.ingest import ingest
-from sblsim.orchestrator.store.plain import plain_body
+from sblsim.orchestrator.store.plain import fathom_detections, plain_body
 from sblsim.orchestrator.store.query import Store
-from sblsim.orchestrator.telemetry.simulate import simulate_study, vue_text
+from sblsim.orchestrator.telemetry.simulate import fathom_text, simulate_study, vue_text
 
 HEAD = "Date and Time (UTC),Receiver,Transmitter,Sensor Value,Sensor Unit,Station Name"
 ROWS = ["2024-06-03 00:00:28.948075,VR2AR-461000,A69-1602-1049,,, north ",
@@ -121,3 +121,46 @@ def test_times_pandas_parses_as_they_are_and_normalised_ones_agree():
     want = [pd.Timestamp("2024-06-03 00:00:28.948075", tz="UTC").value / 1e9] * 3 + \
         [pd.Timestamp("2024-06-03", tz="UTC").value / 1e9, pd.Timestamp("2024-06-03 00:00", tz="UTC").value / 1e9]
     assert np.allclose(got, want, rtol=0, atol=1e-6)
+
+
+def test_a_fathom_piece_is_reduced_to_its_detections_lines():
+    lines = ["DET,2024-06-03 00:00:28,VR2AR,461000,A69-1602-1049", "TEMP,2024-06-03 00:00:28,VR2AR,461000,9.5,10.0",
+             "DET,2024-06-03 00:00:39,VR2AR,461000,A69-1601-60005", "DETX,1,2", " DET,3,4",
+             "DET,2024-06-03 00:00:45,VR2AR,461001,A69-1602-1063"]
+    data, at = fathom_detections(("\n".join(lines) + "\n").encode())
+    assert at.tolist() == [0, 2, 5]  # the csv module would choose the same: the rows whose first field is DET
+    assert data.decode().splitlines() == [lines[k] for k in (0, 2, 5)]
+    assert fathom_detections(("\n".join(lines)).encode())[1].tolist() == [0, 2, 5]  # no last line end
+    for other in ("DET_SENS,2024-06-03 00:00:28,461000,A69-1602-1049,4.5,m", "DET_DESC,Device Time (UTC)",
+                  'DET,"2024-06-03 00:00:28",VR2AR,461000,A69-1602-1049', "TEMP" + ",1" * 600):
+        assert fathom_detections(("\n".join(lines[:2] + [other] + lines[2:]) + "\n").encode()) is None
+    assert fathom_detections(b"TEMP,1,2\nTEMP,3,4\n") is None  # no detection: the text reader's
+
+
+def test_a_fathom_file_with_sensor_records_and_odd_lines_is_stored_as_the_whole_file_reader_reads_it(
+        tmp_path, monkeypatch):
+    d = simulate_study(n_receivers=4, n_tags=3, days=0.1, seed=6).detections.reset_index(drop=True)
+    lines = fathom_text(d).splitlines()
+    lines.insert(3, "DET_SENS_DESC,Device Time (UTC),Serial Number,Full ID,Sensor Value,Sensor Unit")
+    n = len(lines)
+    for k, tag in ((n // 5, None), (n // 2, "A69-1602-9")):  # a sensor detection of a DET record's, one of its own
+        k += lines[k].startswith("TEMP")
+        cells = lines[k].split(",")
+        lines.insert(k + 1, f"DET_SENS,{cells[1]},{cells[6]},{tag or cells[9]},4.5,m")
+    k = 3 * n // 4
+    lines[k] = lines[k].replace(",PPM,", ',"PPM",', 1)  # a quoted cell
+    path = tmp_path / "detections.csv"
+    path.write_text("\n".join(lines) + "\n")
+    plain_pieces = []
+
+    def spy(piece, *args, **kwargs):
+        got = fathom_detections(piece, *args, **kwargs)
+        plain_pieces.append(got is not None)
+        return got
+
+    monkeypatch.setattr(ingest_module, "fathom_detections", spy)
+    ingest(path, tmp_path / "store", piece_bytes=4096)
+    assert any(plain_pieces) and not all(plain_pieces)
+    want = read_detections(path, None)
+    assert (want.frame["sensor_unit"] == "m").sum() >= 2
+    pd.testing.assert_frame_equal(Store(tmp_path / "store").detections().frame, want.frame)
