@@ -6,6 +6,8 @@ are balanced: a quoted cell spanning lines is never cut; in a Fathom CSV, before
 detection's ``DET_SENS`` records stay with it), and each piece is read by the very reader of
 :func:`~sblsim.orchestrator.readers.detections.read_detections` under the file's header (a Fathom piece under the
 ``_DESC`` lines in force there): the same cells checked with the same rules and errors, naming the file's own lines.
+A plain piece is cut into its cells by Arrow's CSV reader (:mod:`.plain`), every other by the text reader's pandas;
+each piece is written on a thread while the next is read.
 What a reader judges over the whole file is carried from piece to piece: each receiver's clock parts (its time going
 back in the file's order: :class:`ClockParts`, as :func:`~sblsim.orchestrator.readers.detections.clock_parts`), the
 encoding (a file not UTF-8 is read again in Latin-1, as the whole-file reader decodes it), the counts of tags and
@@ -62,8 +64,9 @@ from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIO
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
 from sblsim.orchestrator.store.plain import fathom_detections, plain_body
 
-#: The bytes of the file read as one piece [bytes] (each piece's table parsed whole by pandas: reading a VUE export, a
-#: Fathom CSV or a GLATOS extract peaked at 0.31-0.33 GiB with it, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
+#: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract peaked at
+#: 0.37-0.38 GiB with it, one piece read while the one before is written; with pandas' parse alone 0.31-0.33 GiB,
+#: 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
 PIECE_BYTES = 8 * 2**20
 #: A Fathom CSV's first piece [bytes]: its ``_DESC`` lines, which the text reader reads (the pieces after them, in the
 #: lines' columns, are read by Arrow: :func:`~.plain.fathom_detections`).
