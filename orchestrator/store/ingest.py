@@ -121,8 +121,7 @@ class ClockParts:
         part[order] = counted - np.repeat(counted[starts] - reset[order[starts]], ends - starts + 1) + \
             base[sorted_codes]
         frame["clock_part"] = part
-        receiver = np.asarray(names, dtype=object)[codes]
-        self.resets += [{"receiver": str(receiver[k]), "line": int(lines[k]), "previous_line": int(before_line[k]),
+        self.resets += [{"receiver": names[codes[k]], "line": int(lines[k]), "previous_line": int(before_line[k]),
                          "step_s": float(step[k]), "before_s": float(before[k]), "after_s": float(time[k]),
                          "clock_part": int(part[k])} for k in back]
         tag_codes, tags = pd.factorize(frame["tag"])
@@ -295,8 +294,8 @@ def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pr
             if format == "fathom":
                 read = _fathom_plain(head, descs, known, piece, line, name) if encoding == "utf-8" else None
             else:
-                read = (header, *found) if header is not None and \
-                    (found := plain_body(piece, len(header), line)) is not None else None
+                found = plain_body(piece, len(header), line) if header is not None else None
+                read = None if found is None else (header, *found)
             if read is not None:
                 frame, used = rows_read(format, read[0], read[1], read[2], name, _WHAT)
                 yield frame, read[0], used

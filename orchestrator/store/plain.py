@@ -27,6 +27,12 @@ from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, MAX_LINE_CELLS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 
 
+def _plain_text(piece: bytes) -> bool:
+    """Whether a piece's bytes hold no quote, no carriage return and no blank line (the module docstring)."""
+    return bool(piece) and b'"' not in piece and b"\r" not in piece and b"\n\n" not in piece \
+        and not piece.startswith(b"\n")
+
+
 def _blank(column: pa.ChunkedArray) -> pa.ChunkedArray:
     return pc.equal(pc.utf8_trim_whitespace(column), "")
 
@@ -48,7 +54,7 @@ def plain_body(piece: bytes, width: int, first_line: int, max_cells: int = MAX_D
     max_cells, max_rows : int
         The most cells and rows of the piece [1] (the text reader's limits).
     """
-    if not piece or b'"' in piece or b"\r" in piece or b"\n\n" in piece or piece.startswith(b"\n"):
+    if not _plain_text(piece):
         return None
     rows = piece.count(b"\n") + (not piece.endswith(b"\n"))
     if rows * width > max_cells or rows > max_rows:
@@ -61,7 +67,7 @@ def plain_body(piece: bytes, width: int, first_line: int, max_cells: int = MAX_D
             parse_options=pcsv.ParseOptions(newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(column_types={n: pa.string() for n in names},
                                                 strings_can_be_null=False, quoted_strings_can_be_null=False))
-    except (pa.ArrowInvalid, pa.ArrowException):  # a row of another width, a byte not UTF-8: the text reader's
+    except pa.ArrowException:  # a row of another width, a byte not UTF-8: the text reader's
         return None
     if table.num_rows != rows:
         return None
@@ -97,7 +103,7 @@ def fathom_detections(piece: bytes, max_cells: int = MAX_DETECTION_CELLS) -> tup
     max_cells : int
         The most cells of the piece [1].
     """
-    if not piece or b'"' in piece or b"\r" in piece or b"\n\n" in piece or piece.startswith(b"\n"):
+    if not _plain_text(piece):
         return None
     data = np.frombuffer(piece + b"\n\0\0\0\0" if not piece.endswith(b"\n") else piece + b"\0\0\0\0", np.uint8)
     ends = np.flatnonzero(data == ord("\n"))
