@@ -89,8 +89,9 @@ def add_refinement(p: argparse.ArgumentParser, what: str) -> None:
                    help=f"refine the receivers' horizontal positions {what} (a prior of --survey-sigma at the "
                         "table's); writes positions.csv")
     p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
-                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000] (default {SURVEY_SIGMA:g}: a "
-                        "handheld GPS's); only with --refine-positions")
+                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000]: with --refine-positions its "
+                        f"prior (default {SURVEY_SIGMA:g}: a handheld GPS's); without, the survey's stated error in "
+                        "every sigma (default: the positions taken as exact)")
 
 
 def add_receivers(p: argparse.ArgumentParser, required: bool = True) -> None:

@@ -133,8 +133,9 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         Refine the receivers' horizontal positions with the clocks (their sync tags with them), a Gaussian prior at
         the table's positions; written as ``positions.csv``. Default: the table's positions fixed.
     survey_sigma : float, optional
-        [m] in [0.01, 1000], the table's horizontal sigma per axis (the prior; default 3 m, a handheld GPS's);
-        only with ``refine_positions``.
+        [m] in [0.01, 1000], the table's horizontal sigma per axis: with ``refine_positions`` the prior (default
+        3 m, a handheld GPS's); without, the survey's stated error in the sync tags' NEES (default none: the table's
+        positions taken as exact).
     crs : str, optional
         The receivers' CRS (``EPSG:…``; WGS 84 for ``lat``, ``lon`` by default).
     frame : str, optional
@@ -260,7 +261,8 @@ def main(args: argparse.Namespace) -> int:
     if s["sync_tags"]:
         t = s["sync_tags"]
         nees = t["nees_mean_inside"]
-        against = " (against their receivers' positions refined without them)" if "positions" in s else ""
+        against = (" (against their receivers' positions refined without them)" if "positions" in s else
+                   f" (the survey's {s['survey_sigma_m']:g} m per axis in their NEES)" if "survey_sigma_m" in s else "")
         print(f"  sync tags positioned without their own receiver ({t['tags']}){against}: median error "
               f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else
                                                  f", NEES {nees:.3g} inside the array (2 when consistent)"))

@@ -190,7 +190,11 @@ class Store:
         if wrong:
             raise ModelError(f"store: {str(self.folder)!r}: its detections' columns {', '.join(wrong)}; allowed: "
                              + ", ".join(f"{n} ({k})" for n, k in _COLUMNS.items()))
-        frame = table.to_pandas().sort_values("line", kind="stable").reset_index(drop=True)
+        # sorted by line in Arrow, then converted column by column with each Arrow column released as it is taken
+        # (the table, a sorted copy and the frame never held at once: the read's peak a frame and a column more)
+        table = table.take(pc.sort_indices(table, [("line", "ascending")]))
+        frame = table.to_pandas(split_blocks=True, self_destruct=True)
+        del table
         time = frame["time"].to_numpy(float)
         bad = ~np.isfinite(time) | (time < 0) | (time > MAX_EPOCH)
         if bad.any():

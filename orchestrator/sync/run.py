@@ -117,7 +117,7 @@ def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) 
 def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
-                survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
+                survey_sigma: float | None = None, timings: dict | None = None,
                 receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None,
                 window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
@@ -155,8 +155,11 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
     refine_positions : bool
         Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
-    survey_sigma : float
-        [m] the table's horizontal sigma per axis: the refinement's prior.
+    survey_sigma : float, optional
+        [m] the table's horizontal sigma per axis (the survey's stated error): with ``refine_positions`` the
+        refinement's prior (default :data:`SURVEY_SIGMA`); without, a term of each sync tag's NEES
+        (``sync_tags.csv``: its fixes' covariance and the survey's of its receiver's position summed; default none,
+        the table's positions taken as exact), then in ``summary["survey_sigma_m"]``.
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
@@ -186,8 +189,12 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
     started = clock.perf_counter()
     args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
     if not refine_positions:
-        return _synchronise(*args, timings=timings, receivers_file=receivers_file, alternatives=alternatives,
-                            window_days=window_days)
+        outcome = _synchronise(*args, timings=timings, table_sigma=survey_sigma, receivers_file=receivers_file,
+                               alternatives=alternatives, window_days=window_days)
+        if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
+            outcome.summary["survey_sigma_m"] = float(survey_sigma)
+        return outcome
+    survey_sigma = SURVEY_SIGMA if survey_sigma is None else survey_sigma
     refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings,
                            receivers_file=receivers_file, alternatives=alternatives)
     table = _synchronise(*args, table_sigma=survey_sigma, receivers_file=receivers_file, alternatives=alternatives)

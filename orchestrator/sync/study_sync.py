@@ -23,7 +23,7 @@ from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.store.read import is_store, read_any
-from sblsim.orchestrator.sync.run import SURVEY_SIGMA, SyncOutcome, synchronise
+from sblsim.orchestrator.sync.run import SyncOutcome, synchronise
 
 
 def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
@@ -69,7 +69,7 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
 
 def synchronise_files(detections: Path, receivers: Path, format: str | None, sound_speed: float | None,
                       sound_speed_file: Path | None, bin_hours: float, reference: str | None,
-                      refine_positions: bool = False, survey_sigma: float = SURVEY_SIGMA, crs: str | None = None,
+                      refine_positions: bool = False, survey_sigma: float | None = None, crs: str | None = None,
                       frame: str | None = None, window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """``sblsim sync``'s synchronisation from its files (:func:`sblsim.orchestrator.commands.sync.sync`'s arguments,
     checked): the detections read (in ``format``; None: from the file's first line) and the deployments (in ``crs``,
@@ -77,7 +77,8 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     synchronised (:func:`synchronise_study`), the table's positions checked against the sync tags' clock-free travel
     times first
     (:func:`~sblsim.orchestrator.sync.declared.check_sync_positions`, once the arrivals are grouped, before the
-    clocks are fitted); a season longer than ``window_days`` [days] fitted in windows (0: one fit).
+    clocks are fitted); a season longer than ``window_days`` [days] fitted in windows (0: one fit); ``survey_sigma``
+    [m] the table's stated error as :func:`synchronise` takes it.
 
     Raises
     ------

@@ -45,14 +45,16 @@ def _table_hash(table: pd.DataFrame) -> bytes:
 
 
 def clocks_key(assigned, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
-               bin_hours: float) -> str:
+               bin_hours: float, survey_sigma: float | None = None) -> str:
     """The hash (SHA-256, hex) of what a study's synchronisation reads: the assigned detections' table, source and
-    clock resets, the receivers' table, the sound speed or its series, the bins [h] and sblsim's version."""
+    clock resets, the receivers' table, the sound speed or its series, the bins [h], the survey's stated error [m]
+    (where stated) and sblsim's version."""
     digest = hashlib.sha256(b"clocks")
     digest.update(_table_hash(assigned.detections.frame))
     digest.update(_table_hash(assigned.hydrophones))
     digest.update(json.dumps([installed_version(), assigned.detections.source, assigned.detections.clock_resets,
-                              sound_speed, bin_hours], default=_plain).encode())
+                              sound_speed, bin_hours] + ([] if survey_sigma is None else [survey_sigma]),
+                             default=_plain).encode())
     for array in series or ():
         digest.update(np.ascontiguousarray(array, float).tobytes())
     return digest.hexdigest()
@@ -90,7 +92,8 @@ def _read(entry: Path) -> tuple[SyncOutcome, dict[str, Any]]:
 
 
 def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, deployments, sound_speed: float | None,
-                      series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str]):
+                      series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
+                      survey_sigma: float | None = None):
     """:func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks`, its synchronisation taken from ``resume``
     where a run of the same output kept it for what it reads (:func:`clocks_key`), else made and kept there.
 
@@ -100,8 +103,8 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
         As :func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks` (a refusal is never kept).
     """
     if resume is None or sync_dir is not None:
-        return study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours, notes)
-    key = clocks_key(assigned, sound_speed, series, bin_hours)
+        return study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours, notes, survey_sigma)
+    key = clocks_key(assigned, sound_speed, series, bin_hours, survey_sigma)
     kept = resume.fetch(key, _read)
     if kept is not None:
         resume.taken.append("the synchronisation")
@@ -109,7 +112,7 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
         notes.extend(outcome.summary.get("warnings", []))
         return offsets_clocks(outcome.offsets), assigned.hydrophones, info, outcome
     clocks, table, info, outcome = study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours,
-                                                notes)
+                                                notes, survey_sigma)
     if outcome is not None:
         resume.store(key, lambda entry: _write(entry, outcome, info))
     return clocks, table, info, outcome

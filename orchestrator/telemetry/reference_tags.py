@@ -11,8 +11,9 @@ A study's only truth is where its still tags are. Two kinds are scored, each per
   σ [m] (the 2-D covariance's root trace), its 2-D NEES ``eᵀ (P + Q)⁻¹ e`` and its rows flagged. ``P`` is the place's
   covariance as the tracker reports it (the pooled fit's, its consider terms: the clocks' offsets' uncertainty, the
   sound speed's, and the receivers' jackknife, which measures what the other receivers' positions and paths do to
-  it); ``Q`` the position's own error, ``survey_sigma_m`` per horizontal axis where the sheet states it, else none
-  (the position taken as exact: said). Beside it the tracker's single-ping least-squares fixes' median error (the
+  it); ``Q`` the position's own error, ``survey_sigma_m`` per horizontal axis where the sheet states it, else at a
+  deployment the study's stated survey error (``--survey-sigma`` without the refinement), else none (the position
+  taken as exact: said). Beside it the tracker's single-ping least-squares fixes' median error (the
   naive estimate). A tag tracked as moving (``motion`` ``moving``) is scored row by row (its rows not flagged: the
   median error, the mean NEES of ``diag(sigma_x², sigma_y²) + Q``).
 * **every sync tag left out of the synchronisation in turn**: the synchronisation's own leave-one-out
@@ -260,7 +261,8 @@ def _pooled_sync(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
 
 
 def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: dict[str, Any],
-          deployments: Deployments, synced=None, sync_dir: Path | None = None) -> dict[str, Any]:
+          deployments: Deployments, synced=None, sync_dir: Path | None = None,
+          survey_sigma: float | None = None) -> dict[str, Any]:
     """``study.json``'s ``reference_tags``: the reference tags and the sync tags left out in turn, per tag and pooled
     (the module docstring).
 
@@ -278,6 +280,10 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         The synchronisation made here (its ``sync_tags`` and ``residuals``).
     sync_dir : Path, optional
         A synchronisation's folder given (its ``sync_tags.csv`` read, where it has one).
+    survey_sigma : float, optional
+        The receivers' survey error stated for the study [m per horizontal axis]: the ``survey_sigma_m`` of each
+        reference tag at a deployment whose sheet states none, and of the sync tags left out where the
+        synchronisation made here took it (``synced.summary["survey_sigma_m"]``).
 
     Returns
     -------
@@ -293,6 +299,9 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         if spec.role != "reference":
             continue
         truth = truth_of(spec, deployments)
+        if not isinstance(truth, str) and truth["receiver"] and not np.isfinite(truth["survey"]) \
+                and survey_sigma is not None:  # at a surveyed deployment: the survey's stated error
+            truth["survey"] = float(survey_sigma)
         if isinstance(truth, str) or row["status"] != "tracked" or row["folder"] not in outcomes:
             missing.append({"tag": name, "why": truth if isinstance(truth, str) else f"not tracked ({row['reason']})"})
             continue
@@ -308,6 +317,9 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         table = None
         notes.append(f"the sync tags' leave-one-out not scored: {exc}")
     loo = sync_rows(table)
+    stated = None if synced is None else synced.summary.get("survey_sigma_m")
+    for r in loo if stated is not None else ():  # their NEES holds the survey's stated error
+        r["survey_sigma_m"] = float(stated)
     array = None
     if residuals is not None and refs:  # the same figure at every receiver: its median
         values = [persistent_residual(residuals, r) for r in residuals["receiver"].astype(str).unique()]

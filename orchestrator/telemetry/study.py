@@ -168,7 +168,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
               water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
               tz: str | None = None, refine_positions: bool = False,
-              survey_sigma: float = SURVEY_SIGMA, resume: Resume | None = None) -> StudyOutcome:
+              survey_sigma: float | None = None, resume: Resume | None = None) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -222,8 +222,12 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     refine_positions : bool
         Refine the receivers' horizontal positions from the moving tags' own pings and make the study again on them
         where that helps (:mod:`.study_positions`: ``summary["positions"]``, the outcome's ``positions``).
-    survey_sigma : float
-        [m] the receivers' surveyed positions' σ per horizontal axis (the refinement's prior).
+    survey_sigma : float, optional
+        [m] the receivers' surveyed positions' σ per horizontal axis: with ``refine_positions`` the refinement's
+        prior (default :data:`~sblsim.models.sync.identifiability.SURVEY_SIGMA`); without, the survey's stated
+        error, a consider term of every σ (each tag's track, the reference tags' known positions at a deployment,
+        the sync tags left out: :func:`~sblsim.orchestrator.telemetry.reference_tags.score`); default none, the
+        positions taken as exact.
     resume : Resume, optional
         The tags kept by an interrupted run of the same output (:mod:`~sblsim.orchestrator.tracks.resume`): a tag
         whose inputs are unchanged is taken from it, each tag that ends is kept (``summary["resumed"]``).
@@ -270,7 +274,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     def attempt(deployments, assigned, notes: list[str], workdir: Path) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``."""
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
-                                                               series, bin_hours, notes)
+                                                               series, bin_hours, notes, stated)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
         groups = assigned.detections.frame.groupby("tag", sort=False).groups
@@ -315,7 +319,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
                            "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
                            "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
-                           "force_interval": force_interval, "temperature_path": water_path}
+                           "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": stated}
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))
@@ -358,17 +362,19 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                            "refused": int((table_tags["status"] == "refused").sum()),
                            "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
                                        if k}}
-        summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync)
+        summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, stated)
         summary["wall_time_s"] = clock.perf_counter() - begun
         return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
                             daily_counts(assigned.detections.frame))
 
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
+    stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)
     outcome = attempt(deployments, assigned, list(notes), workdir)
     if refine_positions:
         outcome = refined_study(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER),
-                                deployments, assigned, survey_sigma, workdir, TAGS_FOLDER)
+                                deployments, assigned, SURVEY_SIGMA if survey_sigma is None else survey_sigma,
+                                workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun
     return outcome
 

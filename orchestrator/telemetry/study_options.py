@@ -23,20 +23,17 @@ SOUND_SPEED = (1300.0, 1700.0)
 MAX_WORKERS = 256
 
 
-def survey_sigma_argument(value: Any, refine: bool, where: str) -> float:
-    """The survey σ [m] checked: in :data:`SURVEY_SIGMA_RANGE`, given only with the refinement (default
-    :data:`SURVEY_SIGMA`).
+def survey_sigma_argument(value: Any, refine: bool, where: str) -> float | None:
+    """The survey σ [m] checked, in :data:`SURVEY_SIGMA_RANGE`: with the refinement its prior (default
+    :data:`SURVEY_SIGMA`); without, the survey's stated error (default None: the positions taken as exact).
 
     Raises
     ------
     ConfigError
-        Out of its range, or given without the refinement (one line naming ``where``).
+        Out of its range (one line naming ``where``).
     """
     if value is None:
-        return SURVEY_SIGMA
-    if not refine:
-        raise ConfigError(f"{where}: given without refining the positions; allowed: with "
-                          f"{'--refine-positions' if where.startswith('--') else 'refine_positions=True'}")
+        return SURVEY_SIGMA if refine else None
     return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
 
 

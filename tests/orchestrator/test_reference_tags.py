@@ -196,3 +196,46 @@ def test_the_sheets_surveyed_position_is_read_as_a_hostile_cell(tmp_path):
         sheet.write_text("transmitter,role,lat,lon,depth_m,survey_sigma_m,station\n" + body)
         with pytest.raises(ModelError, match=said):
             read_tag_sheet(sheet)
+
+
+#: The survey error stated for the study (``--survey-sigma`` without the refinement) [m per axis].
+STATED = 2.0
+
+
+@pytest.mark.slow
+def test_a_stated_survey_error_is_in_every_sigma(study):
+    """The same study with the receivers' survey error stated (``survey_sigma`` without ``refine_positions``): the
+    reference tags at a deployment take it as their position's error, the one with its own (the sheet's) keeps it,
+    each NEES against a scoring made here with it; each still tag's covariance holds the receivers' survey term (larger
+    than without it in every direction); the sync tags left out are the same fixes with the stated error in their
+    NEES (errors unchanged, NEES lower, ``survey_sigma_m`` said)."""
+    sim, refs, plain, out = study
+    folder = out.parent
+    outcome = run_study(folder / "in" / "detections.csv", folder / "in" / "deployments.csv", folder / "in" / "tags.csv",
+                        workdir=folder / "stated", chosen=refs, workers=1, survey_sigma=STATED)
+    write_study(outcome, folder / "stated")
+    scored = _read(folder / "stated", "reference_tags.csv")
+    before = _read(out, "reference_tags.csv")
+    left, before = (t[t["kind"] == "sync_left_out"].set_index("tag") for t in (scored, before))
+    scored = scored[scored["kind"] == "reference"].set_index("tag")
+    tags = _read(folder / "stated", "tags.csv").set_index("tag")
+    for k, tag in enumerate(refs):
+        still = json.loads((folder / "stated" / tags.loc[tag, "folder"] / "summary.json").read_text())["motion"]
+        tracks = _read(folder / "stated", "tracks.csv")
+        place = tracks.loc[tracks["tag"] == tag, ["x", "y"]].to_numpy(float)[0]  # a still tag: one place
+        survey = SURVEY if k == 0 else STATED
+        P = np.asarray(still["still"]["covariance"], float)[:2, :2]
+        e = place - sim.positions[AT[k]][:2]
+        assert scored.loc[tag, "survey_sigma_m"] == survey
+        assert scored.loc[tag, "nees"] == pytest.approx(e @ np.linalg.solve(P + survey**2 * np.eye(2), e),
+                                                        rel=1e-3, abs=1e-6)
+        plain_still = json.loads((out / _read(out, "tags.csv").set_index("tag").loc[tag, "folder"] /
+                                  "summary.json").read_text())["motion"]["still"]
+        grown = P - np.asarray(plain_still["covariance"], float)[:2, :2]
+        assert np.linalg.eigvalsh(grown).min() > 0, (tag, grown)  # the survey's consider term
+        assert "survey" in still["consider_terms"]
+    assert len(left) and (left["survey_sigma_m"] == STATED).all()
+    assert np.allclose(left["error_m"], before.loc[left.index, "error_m"])
+    assert (left["nees"] < before.loc[left.index, "nees"]).all()
+    assert outcome.summary["reference_tags"]["reference"]["nees_mean"] == pytest.approx(
+        scored.loc[refs, "nees"].mean())

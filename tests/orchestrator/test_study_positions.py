@@ -11,8 +11,10 @@ import pandas as pd
 import pytest
 
 import sblsim
+from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.telemetry.simulate import simulate_study
+from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
 from sblsim.orchestrator.telemetry.study_positions import StudyRefinement, lines, sync_pings, verdict
 from tests.helpers import check_tag_rows, gauge_free, shape_rms
 
@@ -78,9 +80,18 @@ def test_the_console_says_what_was_refined_and_what_was_kept():
                                                                    True)]
 
 
+def test_the_survey_sigma_is_the_prior_or_the_stated_error():
+    """With the refinement the survey σ is its prior (3 m unless given); without, the survey's stated error (None
+    unless given: the positions taken as exact), in range or refused."""
+    assert survey_sigma_argument(None, True, "--survey-sigma") == SURVEY_SIGMA
+    assert survey_sigma_argument(None, False, "--survey-sigma") is None
+    assert survey_sigma_argument(1.5, False, "--survey-sigma") == 1.5 == survey_sigma_argument(1.5, True, "s")
+    with pytest.raises(Exception, match="--survey-sigma: 0.0 is outside"):
+        survey_sigma_argument(0.0, False, "--survey-sigma")
+
+
 @pytest.mark.parametrize("extra,message", [
-    (["--survey-sigma", "2"], "--survey-sigma: given without refining the positions; allowed: with "
-                              "--refine-positions"),
+    (["--survey-sigma", "2000"], "--survey-sigma: 2000.0 is outside the allowed range"),
     (["--refine-positions", "--survey-sigma", "0"], "--survey-sigma"),
 ])
 def test_the_survey_sigma_is_refused_in_one_line(tmp_path, capsys, extra, message):

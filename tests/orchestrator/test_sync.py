@@ -250,7 +250,7 @@ def test_the_positions_refined_on_a_small_array(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, found", [
-    (["--survey-sigma", "2"], "--survey-sigma: given without refining the positions"),
+    (["--survey-sigma", "2000"], "--survey-sigma: 2000.0 is outside the allowed range"),
     (["--refine-positions", "--survey-sigma", "0"], "--survey-sigma: 0.0 is outside the allowed range"),
 ])
 def test_a_bad_survey_sigma_exits_2(tmp_path, capsys, args, found):
