@@ -295,7 +295,12 @@ def wanders(x: np.ndarray, R: np.ndarray, G: np.ndarray, draws: int = DRAWS, see
     step = -(-len(x) // MAX_ORDERED)
     x, R, G = x[::step], R[::step], G[..., ::step]
     rng = np.random.default_rng(seed)
-    white = np.einsum("kab,dkb->dka", np.linalg.cholesky(R), rng.standard_normal((draws, len(x), 2)))
+    try:
+        root = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError:  # a fix's covariance singular to rounding (a pseudo-inverse's): its symmetric root
+        w, V = np.linalg.eigh(0.5 * (R + np.swapaxes(R, 1, 2)))
+        root = V * np.sqrt(np.maximum(w, 0.0))[:, None, :]
+    white = np.einsum("kab,dkb->dka", root, rng.standard_normal((draws, len(x), 2)))
     slow = np.einsum("dq,qak->dka", rng.standard_normal((draws, G.shape[0])), G)
     return bool(order_ratio(x) < order_ratio(white + slow).min())
 

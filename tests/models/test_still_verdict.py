@@ -193,3 +193,22 @@ def test_the_receivers_jackknife_is_the_refits_without_each_receiver():
     d = positions - positions.mean(axis=0)
     g = len(RECEIVERS)
     np.testing.assert_allclose(covariance, (g - 1) / g * sum(np.outer(r, r) for r in d), rtol=1e-12)
+
+
+def test_the_order_test_takes_a_fix_covariance_singular_to_rounding():
+    """A fix's covariance singular to rounding (a pseudo-inverse's, one eigenvalue a hair below 0: what a newer
+    numpy's pinv gave a moving tag's fixes) is drawn from by its symmetric root: the verdict made, not a
+    LinAlgError; and the draws' covariance is that matrix (clipped at 0) whatever path took it."""
+    rng = np.random.default_rng(2)
+    n = 60
+    x = np.c_[np.linspace(0, 30, n), np.zeros(n)] + rng.normal(0, 0.1, (n, 2))  # a tag moving along x
+    R = np.tile(np.diag([0.01, 0.01]), (n, 1, 1))
+    u = np.array([1.0, 1.0]) / np.sqrt(2)
+    R[5] = 0.02 * np.outer(u, u) - 1e-18 * np.eye(2)  # rank one, its other eigenvalue -1e-18
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(R)
+    G = np.zeros((1, 2, n))
+    assert sv.wanders(x, R, G) is True  # moving: ordered far beyond its white errors
+    w, V = np.linalg.eigh(R[5])
+    root = V * np.sqrt(np.maximum(w, 0.0))
+    np.testing.assert_allclose(root @ root.T, 0.02 * np.outer(u, u), atol=1e-15)
