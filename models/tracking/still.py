@@ -145,9 +145,14 @@ def slow_columns(t: np.ndarray, slow: np.ndarray, time_scale: float = SLOW_TIME_
     w = j * np.pi / span
     density = np.sqrt(2.0 * np.pi) * scale * np.exp(-0.5 * (w * scale) ** 2)
     phi = np.sqrt(2.0 / span * density)[:, None] * np.cos(np.outer(w, t - t.min() + MARGIN * scale))  # (J, N)
-    vals, vecs = np.linalg.eigh(0.5 * (slow + slow.T))
-    root = vecs * np.sqrt(np.clip(vals, 0.0, None))  # root rootᵀ = C
-    return np.einsum("jk,ab->jbak", phi, root).reshape(2 * len(j), 2, len(t))
+    return np.einsum("jk,ab->jbak", phi, _root(slow)).reshape(2 * len(j), 2, len(t))
+
+
+def _root(C: np.ndarray) -> np.ndarray:
+    """The symmetric square root of covariances C (..., d, d), its eigenvalues clipped at 0: ``root rootᵀ = C`` for a
+    C positive semi-definite (one singular to rounding included, where a Cholesky factor fails)."""
+    vals, vecs = np.linalg.eigh(0.5 * (C + np.swapaxes(C, -1, -2)))
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))[..., None, :]
 
 
 def step_statistics(x: np.ndarray, R: np.ndarray, G: np.ndarray) -> np.ndarray:
@@ -298,8 +303,7 @@ def wanders(x: np.ndarray, R: np.ndarray, G: np.ndarray, draws: int = DRAWS, see
     try:
         root = np.linalg.cholesky(R)
     except np.linalg.LinAlgError:  # a fix's covariance singular to rounding (a pseudo-inverse's): its symmetric root
-        w, V = np.linalg.eigh(0.5 * (R + np.swapaxes(R, 1, 2)))
-        root = V * np.sqrt(np.maximum(w, 0.0))[:, None, :]
+        root = _root(R)
     white = np.einsum("kab,dkb->dka", root, rng.standard_normal((draws, len(x), 2)))
     slow = np.einsum("dq,qak->dka", rng.standard_normal((draws, G.shape[0])), G)
     return bool(order_ratio(x) < order_ratio(white + slow).min())

@@ -219,9 +219,9 @@ def test_a_stated_survey_error_is_in_every_sigma(study):
     left, before = (t[t["kind"] == "sync_left_out"].set_index("tag") for t in (scored, before))
     scored = scored[scored["kind"] == "reference"].set_index("tag")
     tags = _read(folder / "stated", "tags.csv").set_index("tag")
+    tracks = _read(folder / "stated", "tracks.csv")
     for k, tag in enumerate(refs):
         still = json.loads((folder / "stated" / tags.loc[tag, "folder"] / "summary.json").read_text())["motion"]
-        tracks = _read(folder / "stated", "tracks.csv")
         place = tracks.loc[tracks["tag"] == tag, ["x", "y"]].to_numpy(float)[0]  # a still tag: one place
         survey = SURVEY if k == 0 else STATED
         P = np.asarray(still["still"]["covariance"], float)[:2, :2]
