@@ -20,7 +20,8 @@ import pytest
 #: The units of work that take longest (measured with ``--durations``, docs/architecture.md), longest first: they
 #: start first. A file's tests and a group's keep their order; the other units follow in collection order, and
 #: the documentation site's build from the page runs' figures comes last (it waits for the page chains).
-LONGEST = ("pages-1", "pages-2", "tests/test_docs.py", "tests/test_packaging.py", "tests/test_bad_input.py",
+LONGEST = ("pages-1", "pages-2", "tests/test_tiers.py", "tests/test_docs.py", "tests/test_packaging.py",
+           "tests/test_bad_input.py",
            "tests/orchestrator/test_systems.py", "tests/models/test_rays.py", "tests/orchestrator/test_replay.py",
            "tests/orchestrator/test_beacons.py", "tests/orchestrator/test_campaign.py",
            "tests/orchestrator/test_fmus.py", "tests/fmus_tests/test_binaries.py",
