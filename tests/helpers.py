@@ -83,8 +83,8 @@ class Core:
 
 def _default_signals() -> None:
     # in the child between fork and exec: an ignored signal stays ignored across exec, a default one does not
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, signal.SIG_DFL)
 
 
 def gauge_free(errors: np.ndarray, at: np.ndarray, scale: bool = False) -> np.ndarray:
@@ -106,11 +106,11 @@ def shape_rms(errors: np.ndarray, at: np.ndarray, scale: bool = False) -> float:
 
 
 def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen:
-    """``subprocess.Popen(command, **kwargs)`` with SIGINT and SIGTERM at their defaults in the child.
+    """``subprocess.Popen(command, **kwargs)`` with SIGINT, SIGTERM and SIGHUP at their defaults in the child.
 
     A test that sends the child a signal must not inherit the test process's dispositions: in a background
-    job (``nohup pytest &``) the shell starts pytest with SIGINT ignored, children inherit an ignored signal
-    across exec, and sblsim rightly keeps an ignored SIGINT ignored (POSIX only, as the signals are).
+    job (``nohup pytest &``) the shell starts pytest with SIGINT ignored (and nohup SIGHUP), children inherit an
+    ignored signal across exec, and sblsim rightly keeps an ignored signal ignored (POSIX only, as the signals are).
     """
     return subprocess.Popen(command, preexec_fn=_default_signals, **kwargs)
 
