@@ -5,9 +5,9 @@ the slow one (``-m slow``), and no check is lost between them.
   every test collected, at least as many as before the tiers (2,496);
 * the README's test command and ``.ci/run`` are the commands docs/architecture.md describes;
 * (slow, ``audit``: run by hand, ``pytest -m audit``; CI's slow tier leaves it out, ``-m "slow and not audit"``,
-  for its quarter of an hour) every module of ``models/``, ``orchestrator/`` and ``fmus/`` runs in the fast tier: the
-  fast tier run under coverage (pytest-cov, subprocesses measured too), and every module has lines run beyond its
-  import.
+  for its ten minutes on two workers) every module of ``models/``, ``orchestrator/`` and ``fmus/`` runs in the fast
+  tier: the fast tier run under coverage (pytest-cov, subprocesses measured too), and every module has lines run
+  beyond its import.
 """
 
 from __future__ import annotations
@@ -63,7 +63,8 @@ def test_the_fast_tier_holds_no_slow_test_and_the_tiers_hold_every_test(tmp_path
     fast = [test for test, names in markers.items() if not SLOW_KIND & set(names)]
     slow = [test for test, names in markers.items() if "slow" in names]
     # a network or audit test that is not also marked slow would be in the fast tier
-    assert [test for test, names in markers.items() if {"network", "audit"} & set(names) and "slow" not in names] == []
+    assert [test for test, names in markers.items()
+            if (SLOW_KIND - {"slow"}) & set(names) and "slow" not in names] == []
     assert any("audit" in names for names in markers.values())
     assert len(fast) + len(slow) == len(markers) >= TESTS_BEFORE_THE_TIERS
     assert fast and slow
@@ -83,7 +84,7 @@ def test_ci_runs_the_readme_s_test_command_then_the_slow_tier():
     assert slow and ci.index(command) < slow.start()
     # what CI leaves out of the slow tier is the audit alone, marked slow too (so `pytest -m slow` runs it)
     markers = {name for name, _, _ in (line.partition(":") for line in _markers())}
-    assert {"slow", "network", "audit"} <= markers
+    assert SLOW_KIND <= markers
     # pytest's exit 5 (no test selected) is handled, every other failure fails CI
     assert "-ne 5" in ci
     architecture = (ROOT / "docs" / "architecture.md").read_text()
