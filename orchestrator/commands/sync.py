@@ -266,6 +266,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"  sync tags positioned without their own receiver ({t['tags']}){against}: median error "
               f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else
                                                  f", NEES {nees:.3g} inside the array (2 when consistent)"))
+        if t.get("places"):
+            print(f"  each as one place from all its arrivals, its own receiver's too ({t['places']}): median error "
+                  f"{t['place_median_error_m']:.3g} m, NEES {t['place_nees_mean']:.3g} (2 when consistent), "
+                  f"{t['place_flagged']:,} of {t['place_rows']:,} emissions flagged as moved")
     for note in s["notes"]:
         print(f"note: {note}", file=sys.stderr)
     say_warnings(s)

@@ -82,6 +82,12 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
                "fix_model": "robust (Student-t IRLS from several starts, then Baarda's data snooping and the overall "
                             "test at a test size of 0.001: Baarda 1968); a fix without redundancy is unchecked, not "
                             "counted"}
+        placed = sync_tags[np.isfinite(sync_tags["place_error_m"].to_numpy(float))] \
+            if "place_error_m" in sync_tags else sync_tags.iloc[:0]
+        if len(placed):  # each as one place, as a reference tag (sync_tags.csv's place_* columns)
+            loo |= {"places": int(len(placed)), "place_median_error_m": float(placed["place_error_m"].median()),
+                    "place_nees_mean": float(placed["place_nees"].mean()),
+                    "place_flagged": int(placed["place_flagged"].sum()), "place_rows": int(placed["place_rows"].sum())}
     kept = residuals["kept"].to_numpy()
     return {
         "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "

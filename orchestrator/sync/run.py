@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time as clock
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import pandas as pd
@@ -117,7 +117,7 @@ def _gaps(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, n_tags: int) 
 def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None = None,
                 series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
-                survey_sigma: float | None = None, timings: dict | None = None,
+                survey_sigma: float | Mapping[str, float] | None = None, timings: dict | None = None,
                 receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None,
                 window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
@@ -155,11 +155,13 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         Position each sync tag with the clocks fitted without its arrivals (else with the full fit).
     refine_positions : bool
         Refine the receivers' horizontal positions with the clocks (default: the table's fixed).
-    survey_sigma : float, optional
+    survey_sigma : float or mapping, optional
         [m] the table's horizontal sigma per axis (the survey's stated error): with ``refine_positions`` the
         refinement's prior (default :data:`SURVEY_SIGMA`); without, a term of each sync tag's NEES
-        (``sync_tags.csv``: its fixes' covariance and the survey's of its receiver's position summed; default none,
-        the table's positions taken as exact), then in ``summary["survey_sigma_m"]``.
+        (``sync_tags.csv``: its fixes' or place's covariance and the survey's of its receiver's position summed, and
+        of each place's consider covariance; default none, the table's positions taken as exact), then in
+        ``summary["survey_sigma_m"]``; without ``refine_positions`` also each receiver's, by its serial (a receiver
+        not named: exact).
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
@@ -185,15 +187,22 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         ``refine_positions``, no receiver's position determined by the sync tags (a sparse sync array); times rounded
         too coarsely for the array, a table in another unit than metres (one line each, before the clocks are
         fitted).
+    TypeError
+        Each receiver's ``survey_sigma`` with ``refine_positions`` (the refinement takes one prior).
     """
     started = clock.perf_counter()
     args = (detections, hydrophones, sound_speed, series, bin_hours, reference, leave_one_out)
     if not refine_positions:
-        outcome = _synchronise(*args, timings=timings, table_sigma=survey_sigma, receivers_file=receivers_file,
+        each = isinstance(survey_sigma, Mapping)  # each receiver's (a study on refined positions)
+        table = np.array([float(survey_sigma.get(r, 0.0)) for r in hydrophones["receiver"]]) if each else \
+            survey_sigma
+        outcome = _synchronise(*args, timings=timings, table_sigma=table, receivers_file=receivers_file,
                                alternatives=alternatives, window_days=window_days)
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
-            outcome.summary["survey_sigma_m"] = float(survey_sigma)
+            outcome.summary["survey_sigma_m"] = dict(survey_sigma) if each else float(survey_sigma)
         return outcome
+    if isinstance(survey_sigma, Mapping):
+        raise TypeError("survey_sigma: one prior for the refinement, not each receiver's")
     survey_sigma = SURVEY_SIGMA if survey_sigma is None else survey_sigma
     refined = _synchronise(*args, refine_positions=True, survey_sigma=survey_sigma, timings=timings,
                            receivers_file=receivers_file, alternatives=alternatives)
@@ -207,7 +216,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  series: tuple[np.ndarray, np.ndarray] | None = None, bin_hours: float = 1.0,
                  reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
-                 table_sigma: float | None = None, receivers_file: str | None = None,
+                 table_sigma: float | np.ndarray | None = None, receivers_file: str | None = None,
                  alternatives: dict[str, pd.DataFrame] | None = None, window_days: float | None = None
                  ) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or

@@ -17,13 +17,20 @@ from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_
 from sblsim.models.sync.season import clocks_in_windows
 from sblsim.models.sync.windows import Windows
 from sblsim.orchestrator.sync import segments
+from sblsim.orchestrator.tracks.stationary import still_tag
+
+#: ``sync_tags.csv``'s columns of each left-out sync tag's one place (:func:`_still_place`): ``place_x_m``,
+#: ``place_y_m`` [m], its error from its receiver's position and σ (the 2-D covariance with that position's, root
+#: trace) [m], its 2-D NEES, its emissions placed and those flagged as moved, and the still tag's verdict.
+PLACE_COLUMNS = ("place_x_m", "place_y_m", "place_error_m", "place_sigma_m", "place_nees", "place_rows",
+                 "place_flagged", "place_verdict")
 
 
 def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness, used, linked, start, width,
                positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
                geometry: Geometry | None = None, clock: np.ndarray | None = None,
                site: np.ndarray | None = None, fits: dict | None = None,
-               table_sigma: float | None = None, windows: Windows | None = None) -> pd.DataFrame:
+               table_sigma: float | np.ndarray | None = None, windows: Windows | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
@@ -43,7 +50,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     Where a receiver's clock broke, ``clock`` (n,) is each arrival's clock row and ``site`` each row's receiver
     (:func:`~sblsim.orchestrator.sync.segments.clock_rows`), ``linked`` per clock row. ``fits``: the fits without
     each tag already made (:func:`_fit_without`, by tag). ``table_sigma`` [m]: without ``geometry``, the table's
-    horizontal sigma per axis, summed into the NEES's covariance (the survey's stated error). ``windows``: the
+    horizontal sigma per axis (one, or each receiver's (R,)), summed into the NEES's covariance (the survey's stated
+    error) and a consider term of each place. ``windows``: the
     season's clocks were fitted in these windows (:mod:`sblsim.models.sync.windows`), and so is each fit without a
     tag."""
     dim = positions.shape[1]
@@ -53,7 +61,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     knot_sigma = segments.receiver_sigmas(fit, len(names))
     for i, name in enumerate(tag_names):
         home = tag_home[i]
-        mine = (tag == i) & used & linked[c] & (receiver != home)
+        own = (tag == i) & used & linked[c]  # its arrivals, its own receiver's among them
+        mine = own & (receiver != home)
         if mine.sum() < dim + 2:
             continue
         this = fit
@@ -66,6 +75,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                 continue
             this, still = got
             mine &= still[c]
+            own &= still[c]
         rows_e = np.flatnonzero(mine)
         ems, local = np.unique(emission[rows_e], return_inverse=True)
         arrival = np.full((len(ems), len(names)), np.nan)
@@ -73,21 +83,22 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
         s = np.full(len(ems), this.slowness if slowness is None else np.nan)
         if slowness is not None:
             s = np.bincount(local, slowness[rows_e]) / np.bincount(local)
-        sigma = segments.receiver_values(np.where(np.isfinite(this.scale), this.scale, 1e-3), fit, len(names))
+        white = segments.receiver_values(np.where(np.isfinite(this.scale), this.scale, 1e-3), fit, len(names))
         known = np.isfinite(knot_sigma)
         offset_sigma = np.array([np.median(knot_sigma[j][known[j]]) if known[j].any() else 0.0
                                  for j in range(len(names))])
-        sigma = np.sqrt(sigma ** 2 + offset_sigma ** 2)
+        sigma = np.sqrt(white ** 2 + offset_sigma ** 2)
         where = positions
         truth_cov = np.zeros((dim, dim))
+        survey = None if table_sigma is None else np.broadcast_to(np.asarray(table_sigma, float), (len(names),))
         if geometry is None and table_sigma is not None:
-            truth_cov[:2, :2] = table_sigma ** 2 * np.eye(2)
+            truth_cov[:2, :2] = survey[home] ** 2 * np.eye(2)
         if geometry is not None:  # the receivers where the fit without this tag puts them
             where = positions.copy()
             where[:, :2] += this.shift
             truth_cov[:2, :2] = this.shift_covariance[home]
-            ranging = np.nanmedian(s) * np.sqrt(np.trace(this.shift_covariance, axis1=1, axis2=2) / 2)
-            sigma = np.sqrt(sigma ** 2 + ranging ** 2)
+            survey = np.sqrt(np.trace(this.shift_covariance, axis1=1, axis2=2) / 2)
+            sigma = np.sqrt(sigma ** 2 + (np.nanmedian(s) * survey) ** 2)
         fixes = position_emissions(arrival, where, sigma, s)
         ok = fixes.ok
         if not ok.any():
@@ -112,6 +123,14 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                              "truth_y_m": truth[1], "truth_sigma_m": float(np.sqrt(np.trace(truth_cov))),
                              "table_error_m": float(np.median(np.linalg.norm(fixes.position[ok] - positions[home],
                                                                              axis=1)))})
+        if leave_one_out:  # (else the clocks were fitted with its arrivals: its place is no check)
+            at_home = np.flatnonzero(own & (receiver == home))
+            k = np.searchsorted(ems, emission[at_home])
+            found = k < len(ems)
+            found[found] = ems[k[found]] == emission[at_home[found]]
+            arrival[k[found], home] = time[at_home[found]] - this.offset(c[at_home[found]], time[at_home[found]])
+            rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white, offset_sigma,
+                                         survey, truth, truth_cov))
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
                          "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
@@ -124,8 +143,34 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     if geometry is not None:
         columns += ["truth_x_m", "truth_y_m", "truth_sigma_m", "table_error_m"]
     columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
-                "median_redundancy"]
+                "median_redundancy", *PLACE_COLUMNS]
     return pd.DataFrame(rows, columns=columns)
+
+
+def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray, clock: np.ndarray,
+                 survey: np.ndarray | None, truth: np.ndarray, truth_cov: np.ndarray) -> dict:
+    """A left-out sync tag scored as the still tag it is, as a reference tag is (:data:`PLACE_COLUMNS`): its one
+    place from its emissions' arrivals (E, R) [s] (its own receiver's too: the clocks were fitted without any of
+    them), synchronised by the clocks fitted without it (:func:`~sblsim.orchestrator.tracks.stationary.still_tag`:
+    the pooled fit of the receivers' timing noise ``white`` (R,) [s], the consider terms of the errors pooling does
+    not average, each receiver's clock offset's sigma ``clock`` (R,) [s] and position's ``survey`` (R,) [m per axis;
+    None: exact], and the receivers' jackknife; the emissions that moved beyond what those errors let its
+    single-emission ``fixes`` (:func:`position_emissions`', without its own receiver) wander flagged), against
+    ``truth`` (dim,) [m] of covariance ``truth_cov`` [m²]: the 2-D NEES ``eᵀ (P + Q)⁻¹ e``; ``c`` [m/s]. NaN where
+    the place cannot be fitted (too few receivers: the reason in ``place_verdict``)."""
+    try:
+        still = still_tag(arrival, where, c, (fixes.position, fixes.emission_time, fixes.covariance, fixes.used),
+                          fixes.ok, white, survey, {}, clock)
+    except ModelError as exc:
+        return dict.fromkeys(PLACE_COLUMNS, np.nan) | {"place_verdict": str(exc)}
+    summary = still.summary["still"]
+    place = np.asarray(summary["place"], float)
+    P = np.asarray(summary["covariance"], float)[:2, :2] + truth_cov[:2, :2]
+    e = place[:2] - truth[:2]
+    return {"place_x_m": place[0], "place_y_m": place[1], "place_error_m": float(np.hypot(*e)),
+            "place_sigma_m": float(np.sqrt(np.trace(P))), "place_nees": float(e @ np.linalg.solve(P, e)),
+            "place_rows": len(still.pings), "place_flagged": int(still.moved.sum()),
+            "place_verdict": summary["verdict"]}
 
 
 def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -50,6 +50,7 @@ from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE
 from sblsim.orchestrator.readers.tag_sheet import TagSpec
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER, match
 from sblsim.orchestrator.sync.clocks import _columns, _in_folder
+from sblsim.orchestrator.sync.sync_tags import PLACE_COLUMNS
 
 #: A reference tag is said to lie beyond its σ where its 2-D NEES passes χ²(2)'s quantile at this level.
 BEYOND_LEVEL = 0.99
@@ -58,12 +59,14 @@ BEYOND_LEVEL = 0.99
 MIN_PAIR_ARRIVALS = 10
 #: ``reference_tags.csv``'s columns: ``kind`` ``reference`` or ``sync_left_out``; ``truth`` where the position
 #: scored against comes from; ``truth_*`` that position (in the frame [m], WGS 84 [°]); ``x_m``, ``y_m``, ``z_m`` the
-#: tag's place (a sync tag's: its fixes' median) and ``error_east_m``, ``error_north_m`` its offset from that
-#: position (the frame's x and y); ``error_m``, ``sigma_m``, ``nees`` (a sync tag's: its single fixes' median, median
-#: and mean); ``rows`` and ``flagged`` (a sync tag's: its emissions and those without a trusted fix).
+#: tag's place and ``error_east_m``, ``error_north_m`` its offset from that position (the frame's x and y);
+#: ``error_m``, ``sigma_m``, ``nees``; ``rows`` and ``flagged``; ``scored_by`` how: ``one place`` (a still tag's, a
+#: sync tag's as a reference tag's), ``its rows`` (a reference tag tracked as moving: the median error, the mean NEES
+#: of its rows not flagged) or ``single-emission fixes`` (a sync tag without a place: its fixes' median position,
+#: median error, median σ and mean NEES; its emissions and those without a trusted fix).
 COLUMNS = ("tag", "kind", "truth", "receiver", "truth_x_m", "truth_y_m", "truth_z_m", "truth_lat", "truth_lon", "x_m",
            "y_m", "z_m", "error_m", "error_east_m", "error_north_m", "error_3d_m", "sigma_m", "survey_sigma_m", "nees",
-           "beyond_sigma", "rows", "flagged", "share_flagged", "verdict", "single_fix_median_error_m",
+           "beyond_sigma", "rows", "flagged", "share_flagged", "verdict", "scored_by", "single_fix_median_error_m",
            "receiver_persistent_m", "in_sync", "inside_array")
 
 
@@ -178,7 +181,7 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
         P = np.asarray(still["covariance"], float)[:2, :2] + Q
         e = place[:2] - q[:2]
         nees, error, sigma = float(e @ np.linalg.solve(P, e)), float(np.hypot(*e)), float(np.sqrt(np.trace(P)))
-        verdict = still["verdict"]
+        verdict, scored_by = still["verdict"], "one place"
         depth = place[2] - q[2] if len(place) > 2 else np.nan
     else:  # tracked as moving: its rows not flagged, one by one
         ok = track[(track["quality"] != "flagged") & track["x"].notna()]
@@ -189,7 +192,7 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
         error = float(np.median(np.hypot(d[:, 0], d[:, 1]))) if len(d) else np.nan
         nees = float(np.mean((d**2 / var).sum(axis=1))) if len(d) else np.nan
         sigma = float(np.median(np.sqrt(var.sum(axis=1)))) if len(d) else np.nan
-        verdict, depth = "", (place[2] - q[2] if len(place) > 2 else np.nan)
+        verdict, scored_by, depth = "", "its rows", (place[2] - q[2] if len(place) > 2 else np.nan)
     fixes = outcome.estimates[outcome.estimates["estimator"] == "fix"][["x", "y"]].to_numpy(float)
     fixes = fixes[np.isfinite(fixes).all(axis=1)]
     return {"tag": tag, "kind": "reference", "truth": truth["truth"], "receiver": truth["receiver"],
@@ -199,28 +202,42 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
             "error_3d_m": float(np.hypot(error, depth)) if np.isfinite(depth) else np.nan, "sigma_m": sigma,
             "survey_sigma_m": truth["survey"], "nees": nees, "beyond_sigma": bool(nees > beyond()), "rows": rows,
             "flagged": flagged, "share_flagged": flagged / rows if rows else np.nan, "verdict": verdict,
+            "scored_by": scored_by,
             "single_fix_median_error_m": float(np.median(np.linalg.norm(fixes - q[:2], axis=1))) if len(fixes)
             else np.nan, "receiver_persistent_m": np.nan, "in_sync": truth["in_sync"], "inside_array": None}
 
 
 def sync_rows(table: pd.DataFrame | None) -> list[dict[str, Any]]:
-    """The sync tags' leave-one-out rows (the module docstring) from a synchronisation's ``sync_tags.csv`` table."""
+    """The sync tags' leave-one-out rows (the module docstring) from a synchronisation's ``sync_tags.csv`` table: each
+    tag's one place where the table has it (``place_*``: :data:`~sblsim.orchestrator.sync.sync_tags.PLACE_COLUMNS`),
+    else (a table written before places, or a place that could not be fitted) its single-emission fixes' median
+    error, median σ and mean NEES."""
     if table is None or not len(table):
         return []
     out = []
     for r in table.to_dict("records"):
         heard, fixed = int(r["emissions"]), int(r["fixes"])
         x, y = float(r.get("truth_x_m", r["x_m"])), float(r.get("truth_y_m", r["y_m"]))
-        out.append({"tag": str(r["tag"]), "kind": "sync_left_out", "truth": f"its receiver {r['receiver']}'s position "
-                    "(the synchronisation's)", "receiver": str(r["receiver"]), "truth_x_m": x, "truth_y_m": y,
-                    "truth_z_m": np.nan, "truth_lat": np.nan, "truth_lon": np.nan, "x_m": float(r["median_x_m"]),
-                    "y_m": float(r["median_y_m"]), "z_m": np.nan, "error_m": float(r["median_error_m"]),
-                    "error_east_m": float(r["median_x_m"]) - x, "error_north_m": float(r["median_y_m"]) - y,
-                    "error_3d_m": np.nan, "sigma_m": float(r["median_sigma_m"]), "survey_sigma_m": np.nan,
-                    "nees": float(r["nees_mean"]), "beyond_sigma": None, "rows": heard, "flagged": heard - fixed,
-                    "share_flagged": (heard - fixed) / heard if heard else np.nan, "verdict": "",
-                    "single_fix_median_error_m": float(r["median_error_m"]), "receiver_persistent_m": np.nan,
-                    "in_sync": True, "inside_array": bool(r["inside_array"])})
+        row = {"tag": str(r["tag"]), "kind": "sync_left_out", "truth": f"its receiver {r['receiver']}'s position "
+               "(the synchronisation's)", "receiver": str(r["receiver"]), "truth_x_m": x, "truth_y_m": y,
+               "truth_z_m": np.nan, "truth_lat": np.nan, "truth_lon": np.nan, "x_m": float(r["median_x_m"]),
+               "y_m": float(r["median_y_m"]), "z_m": np.nan, "error_m": float(r["median_error_m"]),
+               "error_east_m": float(r["median_x_m"]) - x, "error_north_m": float(r["median_y_m"]) - y,
+               "error_3d_m": np.nan, "sigma_m": float(r["median_sigma_m"]), "survey_sigma_m": np.nan,
+               "nees": float(r["nees_mean"]), "beyond_sigma": None, "rows": heard, "flagged": heard - fixed,
+               "share_flagged": (heard - fixed) / heard if heard else np.nan, "verdict": "",
+               "single_fix_median_error_m": float(r["median_error_m"]), "receiver_persistent_m": np.nan,
+               "in_sync": True, "inside_array": bool(r["inside_array"]), "scored_by": "single-emission fixes",
+               "without_fix": heard - fixed}
+        if np.isfinite(float(r.get("place_error_m", np.nan))):  # its one place, as a reference tag's
+            px, py, rows, flagged = (float(r["place_x_m"]), float(r["place_y_m"]), int(r["place_rows"]),
+                                     int(r["place_flagged"]))
+            row |= {"x_m": px, "y_m": py, "error_m": float(r["place_error_m"]), "error_east_m": px - x,
+                    "error_north_m": py - y, "sigma_m": float(r["place_sigma_m"]), "nees": float(r["place_nees"]),
+                    "beyond_sigma": bool(float(r["place_nees"]) > beyond()), "rows": rows, "flagged": flagged,
+                    "share_flagged": flagged / rows if rows else np.nan, "verdict": str(r["place_verdict"]),
+                    "scored_by": "one place"}
+        out.append(row)
     return out
 
 
@@ -246,23 +263,45 @@ def _pooled_references(rows: list[dict[str, Any]], terms: set[str]) -> dict[str,
 
 
 def _pooled_sync(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The sync tags' leave-one-out pooled as the synchronisation pools it."""
+    """The sync tags' leave-one-out pooled: the median of the tags' errors, the mean NEES of those scored by their one
+    place (with its 90 % interval), and as the synchronisation pools its single-emission fixes (the mean NEES of the
+    tags inside the array)."""
     if not rows:
         return None
-    inside = [r["nees"] for r in rows if r["inside_array"]]
-    heard = sum(r["rows"] for r in rows)
+    placed = [r for r in rows if r["scored_by"] == "one place"]
+    inside = [r["nees"] for r in rows if r["inside_array"] and r["scored_by"] != "one place"]
     return {"tags": len(rows), "median_error_m": float(np.median([r["error_m"] for r in rows])),
+            "placed": len(placed), "nees_mean": float(np.mean([r["nees"] for r in placed])) if placed else None,
+            "nees_consistent_90": consistent(len(placed)) if placed else None,
+            "rows": int(sum(r["rows"] for r in placed)), "flagged": int(sum(r["flagged"] for r in placed)),
+            "beyond_sigma": [r["tag"] for r in placed if r["beyond_sigma"]], "beyond_nees": beyond(),
             "nees_mean_inside": float(np.mean(inside)) if inside else None, "inside": len(inside),
-            "emissions": int(heard), "without_fix": int(sum(r["flagged"] for r in rows)),
-            "figures": "each tag's single-emission fixes from the other receivers, its own receiver left out and the "
-                       "clocks fitted without its arrivals (sync_tags.csv): their median error, median sigma, mean "
-                       "NEES; pooled: the median of the tags' median errors, the mean NEES of the tags inside the "
-                       "array"}
+            "emissions": int(sum(r["rows"] for r in rows if r["scored_by"] != "one place")),
+            "without_fix": int(sum(r["without_fix"] for r in rows)),
+            "figures": "each tag with the clocks fitted without its arrivals (sync_tags.csv): its one place from all "
+                       "its emissions' arrivals, its own receiver's among them, as a reference tag's (the pooled fit, "
+                       "the consider terms of the clocks' offsets and the survey, the receivers' jackknife), its error "
+                       "from its receiver's position, sigma and NEES, its emissions flagged as moved; where no place, "
+                       "its single-emission fixes from the other receivers (their median error, median sigma, mean "
+                       "NEES: pooled over the tags inside the array). Pooled: the median of the tags' errors, the "
+                       "mean NEES of the places"}
+
+
+def _pooled_still(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """Every still tag scored by one place, reference tags and sync tags left out together: their count, median
+    error, mean NEES and its 90 % interval (None where not both kinds have one)."""
+    placed = [r for r in rows if r["scored_by"] == "one place"]
+    nees = np.array([r["nees"] for r in placed], float)
+    nees = nees[np.isfinite(nees)]
+    if not len(nees) or len({r["kind"] for r in placed}) < 2:
+        return None
+    return {"tags": len(placed), "median_error_m": float(np.nanmedian([r["error_m"] for r in placed])),
+            "nees_mean": float(np.mean(nees)), "nees_consistent_90": consistent(len(nees))}
 
 
 def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: dict[str, Any],
           deployments: Deployments, synced=None, sync_dir: Path | None = None,
-          survey_sigma: float | None = None) -> dict[str, Any]:
+          survey_sigma: float | Mapping[str, float] | None = None) -> dict[str, Any]:
     """``study.json``'s ``reference_tags``: the reference tags and the sync tags left out in turn, per tag and pooled
     (the module docstring).
 
@@ -280,9 +319,10 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         The synchronisation made here (its ``sync_tags`` and ``residuals``).
     sync_dir : Path, optional
         A synchronisation's folder given (its ``sync_tags.csv`` read, where it has one).
-    survey_sigma : float, optional
-        The receivers' survey error stated for the study [m per horizontal axis]: the ``survey_sigma_m`` of each
-        reference tag at a deployment whose sheet states none, and of the sync tags left out where the
+    survey_sigma : float or mapping, optional
+        The receivers' survey error stated for the study [m per horizontal axis], one for all or each receiver's by
+        its name (a study on refined positions: :func:`~.study_positions.position_sigmas`): the ``survey_sigma_m`` of
+        each reference tag at a deployment whose sheet states none, and of the sync tags left out where the
         synchronisation made here took it (``synced.summary["survey_sigma_m"]``).
 
     Returns
@@ -301,7 +341,7 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         truth = truth_of(spec, deployments)
         if not isinstance(truth, str) and truth["receiver"] and not np.isfinite(truth["survey"]) \
                 and survey_sigma is not None:  # at a surveyed deployment: the survey's stated error
-            truth["survey"] = float(survey_sigma)
+            truth["survey"] = _each(survey_sigma, truth["receiver"])
         if isinstance(truth, str) or row["status"] != "tracked" or row["folder"] not in outcomes:
             missing.append({"tag": name, "why": truth if isinstance(truth, str) else f"not tracked ({row['reason']})"})
             continue
@@ -319,13 +359,21 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
     loo = sync_rows(table)
     stated = None if synced is None else synced.summary.get("survey_sigma_m")
     for r in loo if stated is not None else ():  # their NEES holds the survey's stated error
-        r["survey_sigma_m"] = float(stated)
+        r["survey_sigma_m"] = _each(stated, r["receiver"])
     array = None
     if residuals is not None and refs:  # the same figure at every receiver: its median
         values = [persistent_residual(residuals, r) for r in residuals["receiver"].astype(str).unique()]
         array = float(np.nanmedian(values)) if np.isfinite(values).any() else None
     return {"tags": refs + loo, "reference": _pooled_references(refs, terms), "sync_left_out": _pooled_sync(loo),
-            "not_scored": missing, "array_persistent_m": array, "notes": notes}
+            "still": _pooled_still(refs + loo), "not_scored": missing, "array_persistent_m": array, "notes": notes}
+
+
+def _each(survey: float | Mapping[str, float], receiver: str) -> float:
+    """The survey's error of ``receiver``'s position [m per axis]: one for all, or each receiver's (NaN where not
+    named: taken as exact)."""
+    if isinstance(survey, Mapping):
+        return float(survey.get(receiver, np.nan))
+    return float(survey)
 
 
 def given_sync_tags(folder: Path) -> pd.DataFrame | None:
@@ -343,7 +391,7 @@ def given_sync_tags(folder: Path) -> pd.DataFrame | None:
     where = ("x_m", "y_m", "median_x_m", "median_y_m")
     figures = ("emissions", "fixes", "median_error_m", "median_sigma_m", "nees_mean")
     body, lines, name, col = _columns(path, "sync", ("tag", "receiver", *where, *figures, "inside_array"),
-                                      "sblsim sync's sync_tags.csv")
+                                      "sblsim sync's sync_tags.csv", PLACE_COLUMNS)
     out = pd.DataFrame({"tag": pattern(body[col["tag"]], TRANSMITTER, "sync", name, lines, "tag", "a transmitter"),
                         "receiver": pattern(body[col["receiver"]], IDENTIFIER, "sync", name, lines, "receiver",
                                             "a receiver's serial")})
@@ -354,6 +402,14 @@ def given_sync_tags(folder: Path) -> pd.DataFrame | None:
     inside = pattern(body[col["inside_array"]], re.compile("(?i)true|false"), "sync", name, lines, "inside_array",
                      "True or False")
     out["inside_array"] = inside.str.lower() == "true"
+    if not set(PLACE_COLUMNS) <= set(col):  # a table written before the places: its single-emission fixes scored
+        return out
+    for key in PLACE_COLUMNS[:-1]:  # each empty where no place was fitted
+        high = MAX_COORDINATE if key in ("place_x_m", "place_y_m") else 1e12
+        out[key] = numbers(body[col[key]], "sync", name, lines, key, -high if high == MAX_COORDINATE else 0.0, high,
+                           missing=True)
+    out["place_verdict"] = pattern(body[col["place_verdict"]], re.compile(r"[^\n]{0,300}"), "sync", name, lines,
+                                   "place_verdict", "a line of at most 300 characters")
     return out
 
 

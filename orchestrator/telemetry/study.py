@@ -271,10 +271,13 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     if rounded:
         notes.append(rounded)
 
-    def attempt(deployments, assigned, notes: list[str], workdir: Path) -> StudyOutcome:
-        """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``."""
+    def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None) -> StudyOutcome:
+        """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``; ``survey``
+        each receiver's position's error [m per axis] in the reference tags' and sync tags' scores (else the stated
+        survey's)."""
+        scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
-                                                               series, bin_hours, notes, stated)
+                                                               series, bin_hours, notes, scored)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
         groups = assigned.detections.frame.groupby("tag", sort=False).groups
@@ -362,7 +365,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                            "refused": int((table_tags["status"] == "refused").sum()),
                            "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
                                        if k}}
-        summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, stated)
+        summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
         return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
                             daily_counts(assigned.detections.frame))
@@ -372,7 +375,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)
     outcome = attempt(deployments, assigned, list(notes), workdir)
     if refine_positions:
-        outcome = refined_study(outcome, lambda d, a: attempt(d, a, list(notes), workdir / REFINED_FOLDER),
+        outcome = refined_study(outcome, lambda d, a, q: attempt(d, a, list(notes), workdir / REFINED_FOLDER, q),
                                 deployments, assigned, SURVEY_SIGMA if survey_sigma is None else survey_sigma,
                                 workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun

@@ -260,10 +260,21 @@ def _moving(outcome) -> list[str]:
             if row["status"] == "tracked" and row["role"] != "reference" and row["motion"] == "moving"]
 
 
+def position_sigmas(positions: pd.DataFrame, survey_sigma: float) -> dict[str, float]:
+    """Each receiver's position's error in a study on refined positions [m per axis], by its name: a receiver the
+    pings refined, its posterior σ in the array's shape (``sigma_ratio`` × ``survey_sigma``: the array's translation
+    and rotation, which no time of arrival tells, move a still tag and its receiver together); one they did not, the
+    survey's ``survey_sigma`` (its position the survey's)."""
+    refined = positions["refined"].to_numpy(bool)
+    sigma = np.where(refined, positions["sigma_ratio"].to_numpy(float), 1.0) * float(survey_sigma)
+    return {str(r): float(v) for r, v in zip(positions["receiver"], sigma)}
+
+
 def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,
                   tags_folder: str):
     """A study (:class:`~sblsim.orchestrator.telemetry.study.StudyOutcome`) made again by ``again(deployments,
-    assigned)`` (into ``workdir``'s :data:`REFINED_FOLDER`) on the receivers' positions refined from its moving tags
+    assigned, sigmas)`` (into ``workdir``'s :data:`REFINED_FOLDER`; ``sigmas`` each receiver's position's error,
+    :func:`position_sigmas`) on the receivers' positions refined from its moving tags
     where the held-out pings say it helps, in rounds, and kept where its reference and left-out sync tags are not
     worse (the module docstring); its tags' folders (``tags_folder``) moved over the first study's where kept. The
     study returned says what was done (``summary["positions"]``; ``positions``: ``positions.csv``)."""
@@ -287,7 +298,8 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
     rounds = []
     while True:
         shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
-        second = again(*refinement.deployments(deployments, assigned))
+        second = again(*refinement.deployments(deployments, assigned), position_sigmas(refinement.positions,
+                                                                                     survey_sigma))
         rounds.append({"median_shift_m": refinement.summary["median_shift_m"],
                        "largest_shift_m": refinement.summary["largest_shift_m"]})
         if len(rounds) == ROUNDS:
@@ -345,4 +357,4 @@ def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
 
 
 __all__ = ["REFINED_FOLDER", "ROUNDS", "ROUND_TOLERANCE", "SPEED_SIGMA", "StudyRefinement", "WORSE_TOLERANCE", "lines",
-           "refine_study", "refined_study", "sync_pings", "verdict"]
+           "position_sigmas", "refine_study", "refined_study", "sync_pings", "verdict"]

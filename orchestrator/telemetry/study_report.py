@@ -104,32 +104,52 @@ def tag_lines(table: Any) -> list[tuple[str, bool]]:
     return lines
 
 
+def _nees(pooled: dict[str, Any]) -> str:
+    """A pooled NEES and the interval in which 90 % of such means lie where the σ holds, as the console says it."""
+    if pooled.get("nees_mean") is None:
+        return "no NEES"
+    low, high = pooled["nees_consistent_90"]
+    return f"NEES {pooled['nees_mean']:.2g} ({low:.2g} to {high:.2g} in 90 % of studies whose σ holds)"
+
+
 def reference_lines(scored: dict[str, Any] | None) -> list[tuple[str, bool]]:
     """The console's lines of a study's reference tags and sync tags left out in turn (``scored``: ``study.json``'s
-    ``reference_tags``, :mod:`.reference_tags`), each with whether it is for standard error: one line each, pooled;
-    a warning per reference tag beyond its σ; a note per reference tag not scored."""
+    ``reference_tags``, :mod:`.reference_tags`), each with whether it is for standard error: one line each, pooled,
+    and one of both kinds pooled; a warning per still tag beyond its σ; a note per reference tag not scored."""
     if not scored:
         return []
     out: list[tuple[str, bool]] = []
-    ref, loo = scored["reference"], scored["sync_left_out"]
+    ref, loo, both = scored["reference"], scored["sync_left_out"], scored.get("still")
     if ref is not None:
-        nees = "no NEES" if ref["nees_mean"] is None else \
-            f"NEES {ref['nees_mean']:.2g} ({ref['nees_consistent_90'][0]:.2g} to {ref['nees_consistent_90'][1]:.2g} " \
-            f"in 90 % of studies whose σ holds)"
         exact = "" if ref["survey_stated"] == ref["tags"] else \
             f", {ref['tags'] - ref['survey_stated']} of {ref['tags']} positions taken as exact (no survey_sigma_m)"
-        out.append((f"  reference tags: {ref['tags']}, median error {ref['median_error_m']:.2g} m, {nees}, "
+        out.append((f"  reference tags: {ref['tags']}, median error {ref['median_error_m']:.2g} m, {_nees(ref)}, "
                     f"{ref['flagged']:,} of the {_plural(ref['rows'], 'row')} flagged (σ: each place's covariance as "
                     f"tracked{exact})", False))
-    if loo is not None:
+    if loo is not None and loo.get("placed"):
+        fixes = "" if loo["placed"] == loo["tags"] else \
+            f"; {loo['tags'] - loo['placed']} by their single-emission fixes, no place fitted"
+        out.append((f"  sync tags left out in turn (each one place, as a reference tag): {loo['tags']}, median error "
+                    f"{loo['median_error_m']:.2g} m, {_nees(loo)}, {loo['flagged']:,} of the "
+                    f"{_plural(loo['rows'], 'emission')} flagged{fixes}", False))
+    elif loo is not None:
         inside = "" if loo["nees_mean_inside"] is None else \
             f", NEES {loo['nees_mean_inside']:.3g} inside the array ({loo['inside']})"
         out.append((f"  sync tags left out in turn (their single-emission fixes): {loo['tags']}, median error "
                     f"{loo['median_error_m']:.3g} m{inside}, {loo['without_fix']:,} of "
                     f"{_plural(loo['emissions'], 'emission')} without a trusted fix", False))
+    if both is not None:
+        out.append((f"  still tags together (reference and sync left out): {both['tags']}, median error "
+                    f"{both['median_error_m']:.2g} m, {_nees(both)}", False))
     array = scored.get("array_persistent_m")
     for row in scored["tags"]:
-        if row["kind"] != "reference" or not row["beyond_sigma"]:
+        if not row["beyond_sigma"]:
+            continue
+        if row["kind"] != "reference":
+            out.append((f"sblsim: warning: sync tag {row['tag']}, left out, is {row['error_m']:.3g} m from its "
+                        f"receiver {row['receiver']}'s position, NEES {row['nees']:.3g} beyond its σ of "
+                        f"{row['sigma_m']:.2g} m (χ²(2)'s 99 %: {loo['beyond_nees']:.3g}): the receiver's "
+                        "position is wrong, or the tag hangs away from it", True))
             continue
         kept = row["receiver_persistent_m"]
         sync = "" if kept is None or kept != kept else \

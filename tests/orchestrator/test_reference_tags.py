@@ -116,20 +116,37 @@ def test_the_pooled_figures_and_the_console_line(study):
 
 @pytest.mark.slow
 def test_the_sync_tags_left_out_are_the_synchronisations_own(study):
-    """The sync tags' leave-one-out taken from the synchronisation's sync_tags.csv as it is, pooled as it pools it."""
+    """The sync tags' leave-one-out taken from the synchronisation's sync_tags.csv as it is: each tag's one place
+    (its error recomputed here against the simulated position, which is its receiver's in the table), pooled with
+    the reference tags as still tags, and where a tag has no place its single-emission fixes."""
     sim, refs, outcome, out = study
     loo = _read(out, "sync/sync_tags.csv").set_index("tag")
     scored = _read(out, "reference_tags.csv")
     rows = scored[scored["kind"] == "sync_left_out"].set_index("tag")
     assert len(loo) and sorted(rows.index) == sorted(loo.index)
     assert refs[0] not in rows.index and refs[1] not in rows.index  # no longer sync tags
-    assert np.allclose(rows.loc[loo.index, "error_m"], loo["median_error_m"])
-    assert np.allclose(rows.loc[loo.index, "nees"], loo["nees_mean"])
-    assert (rows.loc[loo.index, "flagged"] == loo["emissions"] - loo["fixes"]).all()
+    assert (rows["scored_by"] == "one place").all()
+    place = rows.loc[loo.index, ["x_m", "y_m"]].to_numpy(float)
+    truth = sim.positions[[int(str(t).rsplit("-", 1)[1]) - 60000 for t in loo.index]][:, :2]  # its deployment's
+    assert np.allclose(rows.loc[loo.index, "error_m"], np.hypot(*(place - truth).T), atol=1e-4)  # (the sheet's
+    # latitudes and longitudes to 10 decimals: 10 µm)
+    assert np.allclose(rows.loc[loo.index, "error_m"], loo["place_error_m"])
+    assert np.allclose(rows.loc[loo.index, "nees"], loo["place_nees"])
+    assert np.allclose(rows.loc[loo.index, "single_fix_median_error_m"], loo["median_error_m"])
+    assert (rows.loc[loo.index, "flagged"] == loo["place_flagged"]).all()
     pooled = outcome.summary["reference_tags"]["sync_left_out"]
-    assert pooled["median_error_m"] == pytest.approx(loo["median_error_m"].median())
-    inside = loo.loc[loo["inside_array"], "nees_mean"]
-    assert pooled["nees_mean_inside"] == pytest.approx(inside.mean() if len(inside) else None)
+    assert pooled["median_error_m"] == pytest.approx(loo["place_error_m"].median())
+    assert pooled["nees_mean"] == pytest.approx(loo["place_nees"].mean())
+    both = outcome.summary["reference_tags"]["still"]
+    still = scored[scored["scored_by"] == "one place"]
+    assert both["tags"] == len(still) == len(loo) + 3
+    assert both["nees_mean"] == pytest.approx(still["nees"].mean())
+    lines = [line for line, _ in reference_lines(outcome.summary["reference_tags"])]
+    said = [line for line in lines if line.startswith("  still tags together")]
+    assert len(said) == 1 and f"NEES {still['nees'].mean():.2g} " in said[0]
+    fixes = sync_rows(loo.reset_index().drop(columns=["place_error_m"]))  # a table without places: the fixes
+    assert [r["error_m"] for r in fixes] == pytest.approx(loo["median_error_m"].tolist())
+    assert all(r["scored_by"] == "single-emission fixes" for r in fixes)
 
 
 @pytest.mark.slow
@@ -140,7 +157,8 @@ def test_a_given_synchronisations_sync_tags_are_read_as_hostile_cells(study, tmp
     given = given_sync_tags(out / "sync")
     assert given["tag"].tolist() == loo["tag"].tolist()
     assert np.allclose(given["nees_mean"], loo["nees_mean"]) and (given["inside_array"] == loo["inside_array"]).all()
-    assert pd.DataFrame(sync_rows(given))["error_m"].tolist() == pytest.approx(loo["median_error_m"].tolist())
+    assert pd.DataFrame(sync_rows(given))["error_m"].tolist() == pytest.approx(loo["place_error_m"].tolist())
+    assert (given["place_verdict"] == loo["place_verdict"]).all()
     assert given_sync_tags(tmp_path) is None  # a folder without one: none
     loo["nees_mean"] = loo["nees_mean"].astype(object)
     loo.loc[0, "nees_mean"] = "-3"

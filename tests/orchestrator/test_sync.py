@@ -299,11 +299,13 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     """20 simulated arrays (20 receivers, 6 h, 0.15 ms timing noise, no multipath) synchronised: the sync tags'
     leave-one-out NEES inside the array, averaged over the tags of each seed, is 2-D's 2 over the seeds (the
     project's rule for a consistent estimator, NEES / dimension in [0.75, 2.25]: NEES in [1.5, 4.5]), and the fixes'
-    errors against the simulated positions recomputed here agree with the table's median error."""
+    errors against the simulated positions recomputed here agree with the table's median error. Each tag's one
+    place (``place_*``, every tag: inside the array or not) is as consistent, none flagged as moved, and its error is
+    its distance from the simulated position, recomputed here."""
     from sblsim.orchestrator.readers.detections import Detections
     from sblsim.orchestrator.sync.run import synchronise
 
-    means = []
+    means, places = [], []
     for seed in range(20):
         sim = simulate_sync(n_receivers=20, hours=6.0, seed=seed, noise=0.15e-3, echo_share=0.0)
         t = sim.time + EPOCH
@@ -318,9 +320,14 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
         inside = tags[tags["inside_array"]]
         assert len(inside) >= 5 and tags["fixes"].sum() > 0.9 * tags["emissions"].sum()
         means.append(float(inside["nees_mean"].mean()))
+        error = np.hypot(*(tags[["place_x_m", "place_y_m"]].to_numpy() - sim.positions[j, :2]).T)
+        np.testing.assert_allclose(tags["place_error_m"], error, rtol=1e-9)
+        assert (tags["place_flagged"] == 0).all() and (tags["place_verdict"] == "still").all()
+        places.append(float(tags["place_nees"].mean()))
     print(f"simulated sync tags' NEES inside the array over 20 seeds: {np.mean(means):.2f} (seeds {min(means):.2f} "
-          f"to {max(means):.2f})")
+          f"to {max(means):.2f}); each as one place: {np.mean(places):.2f} ({min(places):.2f} to {max(places):.2f})")
     assert 1.5 <= np.mean(means) <= 4.5, means
+    assert 1.5 <= np.mean(places) <= 4.5, places
 
 
 def test_whole_second_times_are_refused_in_one_line_and_milliseconds_synchronised(tmp_path, capsys):
