@@ -213,7 +213,8 @@ def _tags(study: StudyFolder) -> dict[str, Any]:
 #: The reference tags' table's columns shown (reference_tags.csv has them all).
 REFERENCE_TABLE = {"tag": "tag", "kind": "kind", "truth": "known position", "error_m": "error [m]",
                    "sigma_m": "σ [m]", "nees": "NEES", "beyond_sigma": "beyond its σ", "rows": "rows",
-                   "flagged": "flagged", "verdict": "verdict", "single_fix_median_error_m": "single fixes' error [m]",
+                   "flagged": "flagged", "verdict": "verdict", "scored_by": "scored by",
+                   "single_fix_median_error_m": "single fixes' error [m]",
                    "in_sync": "in the sync", "inside_array": "inside the array"}
 
 
@@ -227,7 +228,8 @@ def _reference(study: StudyFolder) -> dict[str, Any] | None:
                                                      for k in ("reference", "sync_left_out")):
         return None
     groups = []
-    for key, title in (("reference", "reference tags, pooled"), ("sync_left_out", "sync tags left out, pooled")):
+    for key, title in (("reference", "reference tags, pooled"), ("sync_left_out", "sync tags left out, pooled"),
+                       ("still", "still tags together, pooled")):
         value = pooled.get(key)
         if isinstance(value, dict):
             groups.append((title, _pairs([(k, ", ".join(map(str, v)) if isinstance(v, list) else v)
