@@ -1,6 +1,8 @@
 """``sblsim sync``'s ``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers'
 synchronised arrivals, with the clocks fitted without its arrivals (:func:`_fit_without`, leave-one-out), against its
-known position (:func:`_sync_tags`; the fixes :func:`sblsim.models.sync.positions.position_emissions`'s).
+known position (:func:`_sync_tags`; the fixes :func:`sblsim.models.sync.positions.position_emissions`'s), and placed
+as the still tag it is, from all its arrivals (:func:`_still_place`, a reference tag's model:
+:func:`sblsim.orchestrator.tracks.stationary.still_tag`).
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
-from sblsim.orchestrator.telemetry.study_positions import StudyRefinement, lines, sync_pings, verdict
+from sblsim.orchestrator.telemetry.study_positions import StudyRefinement, lines, position_sigmas, sync_pings, verdict
 from tests.helpers import check_tag_rows, gauge_free, shape_rms
 
 
@@ -78,6 +78,13 @@ def test_the_console_says_what_was_refined_and_what_was_kept():
     assert said[-1][1] and "the reference tags' errors are worse on it" in said[-1][0]
     assert lines({"kept": False, "reason": "no moving tag"}) == [("warning: positions not refined: no moving tag",
                                                                    True)]
+
+
+def test_each_positions_error_is_its_shape_sigma_or_the_surveys():
+    """A receiver refined: the survey σ times its sigma_ratio; one held at the survey: the survey σ."""
+    positions = pd.DataFrame({"receiver": ["A", "B", "C"], "refined": [True, False, True],
+                              "sigma_ratio": [0.1, 0.7, 0.25]})
+    assert position_sigmas(positions, 3.0) == pytest.approx({"A": 0.3, "B": 3.0, "C": 0.75})
 
 
 def test_the_survey_sigma_is_the_prior_or_the_stated_error():

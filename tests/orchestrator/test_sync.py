@@ -357,3 +357,39 @@ def test_whole_second_times_are_refused_in_one_line_and_milliseconds_synchronise
     assert codes == {"whole": 2, "ms": 0} and len(lines["whole"]) == 1 and lines["ms"] == []
     assert lines["whole"][0].startswith("sblsim: error: detections '") and "detections.csv" in lines["whole"][0]
     assert "every time is a whole multiple of 1 s (whole seconds" in lines["whole"][0]
+
+
+def test_each_receivers_survey_error_in_the_sync_tags_scores():
+    """``survey_sigma`` by receiver (a study on refined positions): the same scores as one σ where each is that σ; one
+    receiver's alone enters its own sync tag's σ as its position's error (its place's σ² larger by at least 2 σ²
+    against the positions taken as exact) and the other tags' places as a consider term (no σ smaller), the places
+    and errors unchanged; with the refinement, refused (one prior)."""
+    from sblsim.orchestrator.readers.detections import Detections
+    from sblsim.orchestrator.sync.run import synchronise
+
+    sim = simulate_sync(n_receivers=6, hours=3.0, seed=5, noise=0.15e-3, echo_share=0.0)
+    t = sim.time + EPOCH
+    frame = pd.DataFrame({"receiver": [f"R{j}" for j in sim.receiver], "tag": [f"S{i}" for i in sim.tag], "time": t,
+                          "sensor_value": np.nan, "sensor_unit": "", "line": np.arange(len(t)) + 2})
+    names = [f"R{j}" for j in range(6)]
+    hydrophones = pd.DataFrame({"receiver": names, "sync_tag": [f"S{j}" for j in range(6)],
+                                "x": sim.positions[:, 0], "y": sim.positions[:, 1], "z": np.nan})
+
+    def scores(survey):
+        out = synchronise(Detections(frame, "simulated", "yaps"), hydrophones, sound_speed=sim.sound_speed,
+                          reference="R0", survey_sigma=survey)
+        return out.sync_tags.set_index("receiver"), out.summary.get("survey_sigma_m")
+
+    one, said = scores(0.5)
+    each, said_each = scores(dict.fromkeys(names, 0.5))
+    pd.testing.assert_frame_equal(one, each)
+    assert said == 0.5 and said_each == dict.fromkeys(names, 0.5)
+    exact, _ = scores(None)
+    home = exact.index[0]
+    first, _ = scores({home: 2.0})
+    assert len(exact) >= 3 and np.allclose(first["place_error_m"], exact["place_error_m"])
+    assert first.loc[home, "place_sigma_m"] ** 2 >= exact.loc[home, "place_sigma_m"] ** 2 + 2 * 2.0**2 - 1e-9
+    assert (first["place_sigma_m"] >= exact["place_sigma_m"] - 1e-12).all()
+    with pytest.raises(TypeError, match="one prior"):
+        synchronise(Detections(frame, "simulated", "yaps"), hydrophones, sound_speed=sim.sound_speed,
+                    refine_positions=True, survey_sigma={home: 2.0})
