@@ -17,13 +17,15 @@ A study's only truth is where its still tags are. Two kinds are scored, each per
   naive estimate). A tag tracked as moving (``motion`` ``moving``) is scored row by row (its rows not flagged: the
   median error, the mean NEES of ``diag(sigma_x², sigma_y²) + Q``).
 * **every sync tag left out of the synchronisation in turn**: the synchronisation's own leave-one-out
-  (``sync_tags.csv``, :mod:`sblsim.orchestrator.sync.sync_tags`: each sync tag positioned emission by emission from
-  the other receivers, its own left out, with the clocks fitted without its arrivals), taken as it is, not fitted
-  again: its single-emission fixes' median error, median σ and mean NEES against its receiver's position in the
-  table, and its emissions without a trusted fix. Pooled as the synchronisation pools them (the median of the tags'
-  median errors, the mean NEES of those inside the array).
+  (``sync_tags.csv``, :mod:`sblsim.orchestrator.sync.sync_tags`, with the clocks fitted without its arrivals), taken
+  as it is, not fitted again: its one place from all its arrivals, its own receiver's too, by the reference tags'
+  still-tag model (``place_*``: error, σ, NEES, emissions flagged) against its receiver's position, its
+  single-emission fixes' median error beside it; a table without places (an older one) scored by those fixes (their
+  median error, median σ and mean NEES, the emissions without a trusted fix; pooled as the synchronisation pools
+  them: the mean NEES of those inside the array). Pooled: the median of the tags' errors, the mean NEES of the places.
+* **both kinds together** (``still``): every still tag scored by one place, their median error and mean NEES.
 
-A reference tag whose NEES is beyond χ²(2)'s :data:`BEYOND_LEVEL` quantile is said in a warning: it moved, its
+A still tag whose NEES is beyond χ²(2)'s :data:`BEYOND_LEVEL` quantile is said in a warning: it moved, its
 position is wrong, or a receiver's is. For a tag at a deployment, where the clocks were synchronised here, the
 warning says how much the synchronisation's residuals at that receiver keep that its clock does not explain: the
 root mean square over the other receivers' sync tags it hears of their arrivals' median residual
