@@ -2,7 +2,7 @@
 synchronised arrivals, with the clocks fitted without its arrivals (:func:`_fit_without`, leave-one-out), against its
 known position (:func:`_sync_tags`; the fixes :func:`sblsim.models.sync.positions.position_emissions`'s), and placed
 as the still tag it is, from all its arrivals (:func:`_still_place`, a reference tag's model:
-:func:`sblsim.orchestrator.tracks.stationary.still_tag`).
+:func:`sblsim.models.tracking.still_tag.still_tag`).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from sblsim.models.sync.emissions import connected
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.models.sync.season import clocks_in_windows
 from sblsim.models.sync.windows import Windows
+from sblsim.models.tracking.still_tag import still_tag
 from sblsim.orchestrator.sync import segments
-from sblsim.orchestrator.tracks.stationary import still_tag
 
 #: ``sync_tags.csv``'s columns of each left-out sync tag's one place (:func:`_still_place`): ``place_x_m``,
 #: ``place_y_m`` [m], its error from its receiver's position and σ (the 2-D covariance with that position's, root
@@ -153,7 +153,7 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
                  survey: np.ndarray | None, truth: np.ndarray, truth_cov: np.ndarray) -> dict:
     """A left-out sync tag scored as the still tag it is, as a reference tag is (:data:`PLACE_COLUMNS`): its one
     place from its emissions' arrivals (E, R) [s] (its own receiver's too: the clocks were fitted without any of
-    them), synchronised by the clocks fitted without it (:func:`~sblsim.orchestrator.tracks.stationary.still_tag`:
+    them), synchronised by the clocks fitted without it (:func:`~sblsim.models.tracking.still_tag.still_tag`:
     the pooled fit of the receivers' timing noise ``white`` (R,) [s], the consider terms of the errors pooling does
     not average, each receiver's clock offset's sigma ``clock`` (R,) [s] and position's ``survey`` (R,) [m per axis;
     None: exact], and the receivers' jackknife; the emissions that moved beyond what those errors let its

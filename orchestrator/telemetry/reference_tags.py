@@ -4,7 +4,7 @@
 A study's only truth is where its still tags are. Two kinds are scored, each per tag and pooled:
 
 * **a reference tag** (the tag sheet's role ``reference``, tracked as still: one place for all its pings,
-  :mod:`sblsim.orchestrator.tracks.stationary`) at a known position: the sheet's ``lat``, ``lon`` [, ``depth_m``]
+  :mod:`sblsim.models.tracking.still_tag`) at a known position: the sheet's ``lat``, ``lon`` [, ``depth_m``]
   (projected into the study's frame), else the position of the deployment it sits at, the one the sheet's
   ``receiver`` (or ``station``) cell names or else the one whose sync-tag cell names it (``truth`` says which). Its
   place (its first, where it moved) against that position: the error [m] (2-D, and 3-D where both have a depth), its

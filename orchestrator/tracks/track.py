@@ -33,6 +33,7 @@ from sblsim.models.tracking.depth import check_given_depth
 from sblsim.models.tracking.geometry import check_array
 from sblsim.models.tracking.integrity import protection_levels
 from sblsim.models.tracking.receivers import receiver_residuals
+from sblsim.models.tracking.still_tag import still_tag
 from sblsim.models.tracking.strays import SET_ASIDE_REASON
 from sblsim.orchestrator.io.frames import frame_summary
 from sblsim.orchestrator.io.times import iso_utc
@@ -49,7 +50,6 @@ from sblsim.orchestrator.tracks.depth import (
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
-from sblsim.orchestrator.tracks.stationary import still_tag
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
 from sblsim.orchestrator.tracks.tracker import (
     DEPTH_SIGMA,
@@ -74,7 +74,7 @@ def _reason_counts(reason: pd.Series) -> dict[str, int]:
 
 
 #: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
-#: all pings, :func:`~sblsim.orchestrator.tracks.stationary.still_tag`).
+#: all pings, :func:`~sblsim.models.tracking.still_tag.still_tag`).
 MOTIONS = ("moving", "stationary")
 
 

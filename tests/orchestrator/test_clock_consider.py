@@ -14,11 +14,11 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking.stationary import stationary_fix
+from sblsim.models.tracking.still_tag import stationary_consider
 from sblsim.orchestrator.readers.receivers_file import read_receivers
 from sblsim.orchestrator.sync.clocks import read_clocks
 from sblsim.orchestrator.sync.matrix_files import write_matrix
 from sblsim.orchestrator.sync.toa import ToaOutcome
-from sblsim.orchestrator.tracks.stationary import stationary_consider
 from sblsim.orchestrator.tracks.track import track
 
 RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0]])

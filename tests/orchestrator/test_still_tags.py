@@ -1,4 +1,4 @@
-"""Still tags tracked (orchestrator/tracks/track.py with ``motion="stationary"``, orchestrator/tracks/stationary.py):
+"""Still tags tracked (orchestrator/tracks/track.py with ``motion="stationary"``, models/tracking/still_tag.py):
 simulated times of arrival of a tag at a fixed place in water whose sound speed changes by ±5 m/s over a day (none
 flagged, an honest σ), of one moved 20 m half way (flagged from its move, said, its second place in the summary) and
 of an animal (moving: every row flagged)."""

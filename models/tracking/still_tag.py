@@ -1,4 +1,5 @@
-"""A stationary tag (``motion`` ``stationary``): one position for all its pings, pooled from its arrivals
+"""A still tag (``motion`` ``stationary``; a reference tag; a sync tag left out of the synchronisation): one position
+for all its pings, pooled from its arrivals
 (:mod:`sblsim.models.tracking.stationary`), the consider covariance of the errors pooling does not average (the
 receivers' survey, the sound speed, the receivers' clock offsets, and what the receivers' jackknife shows), and the
 verdict of whether, and from when, it moved (:mod:`sblsim.models.tracking.still`).
