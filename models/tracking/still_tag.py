@@ -213,4 +213,14 @@ def _number(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-__all__ = ["StillTag", "receivers_term", "stationary_consider", "stationary_track", "still_tag"]
+def place_score(still: dict[str, Any], truth: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+    """A still tag's place (``still``: :func:`still_tag`'s ``summary["still"]``, its ``place`` and ``covariance``)
+    against a known position ``truth`` (≥ 2,) [m] of horizontal covariance ``known`` (2, 2) [m²]: its offset ``e``
+    (2,) [m], the error ``|e|`` [m], σ (the root trace of the place's horizontal covariance plus ``known``) [m] and
+    the 2-D NEES ``eᵀ (P + Q)⁻¹ e``."""
+    P = np.asarray(still["covariance"], float)[:2, :2] + known
+    e = np.asarray(still["place"], float)[:2] - np.asarray(truth, float)[:2]
+    return e, float(np.hypot(*e)), float(np.sqrt(np.trace(P))), float(e @ np.linalg.solve(P, e))
+
+
+__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "still_tag"]

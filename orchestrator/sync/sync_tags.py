@@ -18,7 +18,7 @@ from sblsim.models.sync.emissions import connected
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.models.sync.season import clocks_in_windows
 from sblsim.models.sync.windows import Windows
-from sblsim.models.tracking.still_tag import still_tag
+from sblsim.models.tracking.still_tag import place_score, still_tag
 from sblsim.orchestrator.sync import segments
 
 #: ``sync_tags.csv``'s columns of each left-out sync tag's one place (:func:`_still_place`): ``place_x_m``,
@@ -166,13 +166,10 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
     except ModelError as exc:
         return dict.fromkeys(PLACE_COLUMNS, np.nan) | {"place_verdict": str(exc)}
     summary = still.summary["still"]
-    place = np.asarray(summary["place"], float)
-    P = np.asarray(summary["covariance"], float)[:2, :2] + truth_cov[:2, :2]
-    e = place[:2] - truth[:2]
-    return {"place_x_m": place[0], "place_y_m": place[1], "place_error_m": float(np.hypot(*e)),
-            "place_sigma_m": float(np.sqrt(np.trace(P))), "place_nees": float(e @ np.linalg.solve(P, e)),
-            "place_rows": len(still.pings), "place_flagged": int(still.moved.sum()),
-            "place_verdict": summary["verdict"]}
+    _, error, sigma, nees = place_score(summary, truth, truth_cov[:2, :2])
+    return {"place_x_m": summary["place"][0], "place_y_m": summary["place"][1], "place_error_m": error,
+            "place_sigma_m": sigma, "place_nees": nees, "place_rows": len(still.pings),
+            "place_flagged": int(still.moved.sum()), "place_verdict": summary["verdict"]}
 
 
 def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowness, used, start, width, n_rows: int,

@@ -46,6 +46,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.still_tag import place_score
 from sblsim.orchestrator.readers.cells import numbers, pattern
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE
@@ -180,9 +181,7 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
     rows, flagged = _row(track)
     if still is not None:  # one place (its first, where it moved) and its covariance
         place = np.asarray(still["place"], float)
-        P = np.asarray(still["covariance"], float)[:2, :2] + Q
-        e = place[:2] - q[:2]
-        nees, error, sigma = float(e @ np.linalg.solve(P, e)), float(np.hypot(*e)), float(np.sqrt(np.trace(P)))
+        e, error, sigma, nees = place_score(still, q, Q)
         verdict, scored_by = still["verdict"], "one place"
         depth = place[2] - q[2] if len(place) > 2 else np.nan
     else:  # tracked as moving: its rows not flagged, one by one
@@ -407,9 +406,8 @@ def given_sync_tags(folder: Path) -> pd.DataFrame | None:
     if not set(PLACE_COLUMNS) <= set(col):  # a table written before the places: its single-emission fixes scored
         return out
     for key in PLACE_COLUMNS[:-1]:  # each empty where no place was fitted
-        high = MAX_COORDINATE if key in ("place_x_m", "place_y_m") else 1e12
-        out[key] = numbers(body[col[key]], "sync", name, lines, key, -high if high == MAX_COORDINATE else 0.0, high,
-                           missing=True)
+        low, high = (-MAX_COORDINATE, MAX_COORDINATE) if key in ("place_x_m", "place_y_m") else (0.0, 1e12)
+        out[key] = numbers(body[col[key]], "sync", name, lines, key, low, high, missing=True)
     out["place_verdict"] = pattern(body[col["place_verdict"]], re.compile(r"[^\n]{0,300}"), "sync", name, lines,
                                    "place_verdict", "a line of at most 300 characters")
     return out
