@@ -59,12 +59,19 @@ def pytest_configure(config):
     """Under ``PYTHONDONTWRITEBYTECODE`` (set in many containers) no process writes the bytecode of sblsim's
     modules, so each of the suite's thousand-odd processes (the commands it runs, the pages' blocks) compiles them
     all again, about 0.14 s each. The run's first process compiles them once into their ``__pycache__`` (ignored
-    by git; Python reads what is there whatever the setting); a stale file is recompiled by its timestamp."""
-    if sys.dont_write_bytecode and not hasattr(config, "workerinput"):
-        import compileall
+    by git; Python reads what is there whatever the setting); a stale file is recompiled by its timestamp.
 
-        for name in PACKAGE_DIRS:
-            compileall.compile_dir(ROOT / name, quiet=2)
+    The same setting keeps pytest from keeping the test files with their asserts rewritten (``tests/__pycache__``),
+    so every worker rewrote all of them at every run: about 15 s of each worker's collection of 27 s. Each test
+    process (the run's, and its workers, before they collect) may write bytecode again; the processes the tests
+    start keep the setting."""
+    if sys.dont_write_bytecode:
+        if not hasattr(config, "workerinput"):
+            import compileall
+
+            for name in PACKAGE_DIRS:
+                compileall.compile_dir(ROOT / name, quiet=2)
+        sys.dont_write_bytecode = False
 
 
 def pytest_collection_modifyitems(config, items):

@@ -87,6 +87,7 @@ def test_replicates_are_the_runs_of_each_replicate_alone():
         assert {**s, "wall_time": 0} == {**alone, "wall_time": 0}
 
 
+@pytest.mark.slow
 def test_nothing_is_written_without_out_and_the_files_with_it(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     r = sblsim.run("semicircle", set=[SHORT])

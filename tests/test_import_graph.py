@@ -5,8 +5,10 @@ import only where it defers a heavy library."""
 from __future__ import annotations
 
 import ast
+import functools
 import subprocess
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 
 import pytest
@@ -85,7 +87,25 @@ def _type_checking(node: ast.AST) -> bool:
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-IMPORTS = {name: _imports(name, path) for name, path in MODULES.items()}
+class _Imports(Mapping):
+    """Every module's imports (:func:`_imports`), read when first asked for: every worker of the suite collects this
+    file, one runs its tests."""
+
+    @functools.cached_property
+    def _read(self) -> dict[str, list[tuple[str, int, bool]]]:
+        return {name: _imports(name, path) for name, path in MODULES.items()}
+
+    def __getitem__(self, name: str) -> list[tuple[str, int, bool]]:
+        return self._read[name]
+
+    def __iter__(self):
+        return iter(self._read)
+
+    def __len__(self) -> int:
+        return len(self._read)
+
+
+IMPORTS = _Imports()
 
 
 def _own(module: str) -> str | None:

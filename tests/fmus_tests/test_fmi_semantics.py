@@ -171,9 +171,9 @@ def test_two_instances_side_by_side_equal_runs_in_their_own_process(fmu_dir, tmp
 
 
 @pytest.mark.parametrize("steps", [
-    [T / 4] * 80,                                   # four host steps per slot
-    [T] * 20,                                       # one per slot
-    [0.03, 0.07, 0.25, 0.05, 0.6, 0.1, 0.9],        # irregular, some spanning several slots
+    pytest.param([T / 4] * 80, marks=pytest.mark.slow),  # four host steps per slot
+    [T] * 20,                                            # one per slot
+    [0.03, 0.07, 0.25, 0.05, 0.6, 0.1, 0.9],             # irregular, some spanning several slots
 ], ids=["quarter", "slot", "irregular"])
 def test_slots_do_not_depend_on_the_host_step(fmu_dir, steps):
     """The channel sends slot k at t_k = k T of its own clock, whatever the host's steps (2 s of slots), and

@@ -69,6 +69,7 @@ def _prediction(design, legs, rows, mapping, p, theta):
     return np.log(tau) / design.unit - p @ theta[3:]
 
 
+@pytest.mark.slow
 def test_the_jacobian_is_the_prediction_s_finite_differences():
     rng = np.random.default_rng(0)
     replies, _ = _survey(rng, hours=1.0)

@@ -8,6 +8,7 @@ from dataclasses import replace
 from itertools import combinations
 
 import numpy as np
+import pytest
 
 from sblsim.models.receiver import toa_tracking as tt
 from sblsim.models.tracking import modes
@@ -50,6 +51,7 @@ def test_a_windows_cost_is_the_whole_costs_change():
         assert abs(change) > 1.0  # a change that could be missed
 
 
+@pytest.mark.slow
 def test_a_windows_log_determinant_is_its_hessians():
     """The ln det that weighs a mode (:func:`modes._window_costs`' second part, Laplace's evidence) at the track's
     end (three pings, 18 states): the same as the ln det of the Hessian of the whole cost written again with scipy's
@@ -134,6 +136,7 @@ def test_windows_solved_together_are_each_solved_alone():
         assert np.abs(mine[:, 4] - alone[:, 4]).max() < 1e-6
 
 
+@pytest.mark.slow
 def test_the_covariance_widens_only_with_late_arrivals_modelled():
     """Without late arrivals in the model the track is returned as it is; with them its position covariance is
     the track's plus a positive semi-definite spread, and a track re-solved from a better mode costs less."""

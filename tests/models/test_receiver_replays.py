@@ -229,7 +229,8 @@ def replay_ukf(ts, cfg, ratio):
     return {k: np.array(v) for k, v in out.items()}
 
 
-@pytest.fixture(scope="module", params=[("ekf-seq", 1), ("ekf-seq", 3), ("ukf", 1), ("ukf", 3)],
+@pytest.fixture(scope="module", params=[("ekf-seq", 1), ("ekf-seq", 3), ("ukf", 1),
+                                          pytest.param(("ukf", 3), marks=pytest.mark.slow)],
                 ids=["ekf-seq-ratio1", "ekf-seq-ratio3", "ukf-ratio1", "ukf-ratio3"])
 def recorded(request):
     receiver, ratio = request.param

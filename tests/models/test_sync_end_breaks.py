@@ -97,6 +97,7 @@ def test_the_arrivals_beyond_a_jump_near_the_end_pull_no_split_from_the_search(s
     assert np.array_equal(used & (cut.clock < 0), used & sim.after & (sim.receiver == RECEIVER))
 
 
+@pytest.mark.slow
 def test_no_clock_cut_without_a_jump_on_20_seeds():
     """20 simulations without a jump (seeds 100 to 119, 4 h each): no clock of their 160 cut, the fit returned as
     it was."""

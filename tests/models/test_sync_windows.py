@@ -56,6 +56,7 @@ def _truth(sim, t, origin, pick):
     return (sim.time - (tau + sim.offset0[0] + sim.drift[0] * tau))[pick]
 
 
+@pytest.mark.slow
 def test_a_fortnight_in_windows_as_one_fit():
     """5 windows of 3 days with 12 h overlaps: the same bins, one clock row per receiver; all but a few arrivals at
     the rejection threshold (0.3 % at most; 21 of 26,075 here) rejected alike; the offsets within a tenth of one fit's
@@ -106,6 +107,7 @@ def test_a_break_at_a_windows_edge_found_once(day):
     assert rms[1] <= 1.05 * rms[0]
 
 
+@pytest.mark.slow
 def test_a_sync_tags_leave_one_out_in_windows_as_in_one_fit():
     """Sync tag 3 left out, the clocks refitted with the season's rejections and scales in the windows and once:
     the offsets within a tenth of their sigma (no reweighting: the same arrivals in both)."""

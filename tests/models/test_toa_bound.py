@@ -6,6 +6,7 @@ EKF over 20 seeds)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from sblsim.models.receiver import toa_bound as tb
 from sblsim.models.receiver import toa_tracking as tt
@@ -60,6 +61,7 @@ def test_single_ping_fix_reaches_its_drms():
         assert abs(rms / predicted - 1) <= 0.15, (rms, predicted)
 
 
+@pytest.mark.slow
 def test_ekf_reaches_its_pcrb_over_20_seeds():
     s = tt.TrackerSettings(sound_speed=C, sigma_toa=SIGMA, interval=2.0, acceleration_psd=1e-3, jitter=1e-3)
     motion = tb.MotionModel.of(s)

@@ -165,6 +165,7 @@ def test_the_covariance_is_the_inverse_of_the_information():
         assert np.allclose(robust.P[k], block, rtol=1e-6, atol=1e-12 * np.abs(block).max())
 
 
+@pytest.mark.slow
 def test_consistent_on_simulated_pings_with_late_arrivals_and_better_than_rts():
     """20 seeds of simulated pings (Lake Hald's array, a quarter of the arrivals heard, 5 % of them 1 to 3 ms late):
     the robust smoother's 2-D NEES against the exact truth within 20 % of 2 (consistent: its covariance from the

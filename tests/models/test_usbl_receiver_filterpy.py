@@ -91,7 +91,7 @@ def replay(ts, cfg, ratio):
     return {n: np.array(v) for n, v in out.items()}, updates, closest
 
 
-@pytest.fixture(scope="module", params=[1, 3], ids=["ratio1", "ratio3"])
+@pytest.fixture(scope="module", params=[1, pytest.param(3, marks=pytest.mark.slow)], ids=["ratio1", "ratio3"])
 def recorded(request):
     ratio = request.param
     cfg = load_config("square", ["platform.system=usbl", "simulation.duration=80", "acoustics.loss_pct=20",

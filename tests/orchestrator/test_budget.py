@@ -212,6 +212,7 @@ def test_the_command_writes_the_budget(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_command_compares_budgets(tmp_path, capsys):
     out = tmp_path / "c"
     assert main(["budget", "semicircle", "--set", "simulation.duration=10", "--replicates", "3", "--compare",

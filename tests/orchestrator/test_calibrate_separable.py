@@ -265,6 +265,7 @@ def test_the_bound_and_the_sigma_are_one_information_at_two_tracks(pattern, gap)
         assert ratio > gap, ratio
 
 
+@pytest.mark.slow
 def test_a_pattern_that_separates_the_gradient_meets_its_bound_over_replicates():
     """The box-in with the ocean's horizontal gradient, solved with the deep gradient, on a figure-eight (which
     separates it, above; one circle is refused): over 40 replicates the horizontal RMS error is the Cramér–Rao

@@ -123,6 +123,7 @@ def test_reference_campaign_layout(reference):
     assert (result.out / "study.toml").is_file()
 
 
+@pytest.mark.slow
 def test_same_runs_with_two_worker_processes(reference, tmp_path):
     study, ref = reference
     result = run_campaign(study, tmp_path / "w2", workers=2, progress=False)
@@ -601,6 +602,7 @@ def test_unreachable_scheduler(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
 
 
+@pytest.mark.slow
 def test_something_else_answering_at_the_scheduler_address(tmp_path):
     """A server on 127.0.0.1 that answers with garbage: one line naming --scheduler, in seconds, nothing written."""
     server = socket.socket()

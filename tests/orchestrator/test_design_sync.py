@@ -90,6 +90,7 @@ def test_the_fitted_clocks_are_the_drawn_ones_within_three_sigmas(walk):
     np.testing.assert_allclose(np.sort(np.abs(error)), np.sort(np.abs(synced.error)), rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_track_through_synchronised_clocks_is_within_ten_percent_of_the_true_clocks(walk):
     """Issue 68's target: the same pings tracked through the synchronised clocks within 10 % (RMS) of their track
     with the true clocks; and without the synchronisation (the raw clocks' readings) the track is far worse, so

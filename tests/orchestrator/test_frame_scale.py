@@ -49,6 +49,7 @@ def test_a_frame_that_distorts_the_array_is_refused_naming_its_scale():
             assert f"{scale:.4g}" in line or f"{low:.4g}" in line
 
 
+@pytest.mark.slow
 def test_the_study_refuses_web_mercator_before_any_work(tmp_path):
     done = subprocess.run([sys.executable, "-m", "sblsim.orchestrator.cli", "track", str(BOATS / "detections.csv"),
                            "--receivers", str(BOATS / "deployments.csv"), "--frame", "EPSG:3857",

@@ -67,6 +67,7 @@ def test_stray_rows_are_set_aside_listed_and_kept_in_the_track_with_their_reason
     assert track.loc[~aside, ["x", "y"]].notna().all().all()
 
 
+@pytest.mark.slow
 def test_an_interval_the_rows_contradict_is_refused_in_one_line_and_taken_with_force(tmp_path, capsys, record):
     folder, matrix, _ = record
     assert _replay(folder, tmp_path / "no", "30:60") == 2

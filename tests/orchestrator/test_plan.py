@@ -210,6 +210,7 @@ def test_a_campaign_resolves_each_cell_once(counted, tmp_path):
     _once(counted, 4)
 
 
+@pytest.mark.slow
 def test_an_ssp_export_and_its_run_are_resolved_once(counted, fmu_dir, tmp_path):
     from sblsim.orchestrator.cli import main
 

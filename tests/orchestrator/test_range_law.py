@@ -192,6 +192,7 @@ def test_the_fmus_carry_the_law_as_the_local_engine_does():
     assert not np.isclose(constant["e_tot_rms"][0], local["e_tot_rms"][0], rtol=1e-3)
 
 
+@pytest.mark.slow
 def test_sblsim_run_with_the_law_prints_its_bound(tmp_path, capsys):
     """``sblsim run`` with acoustics.range_k > 0: the PCRB printed and in summary.json (a number), the NEES as
     ever (exit 0)."""

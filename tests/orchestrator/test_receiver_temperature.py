@@ -154,6 +154,7 @@ def test_receiver_records_need_the_time_origin(tmp_path):
         read_temperature_series(path)
 
 
+@pytest.mark.slow
 def test_a_study_tracked_with_its_own_fathom_records(tmp_path):
     """``sblsim.track(..., temperature_file=<the Fathom detections>, salinity=35)``: every tag's sound speed is the
     temperature series', TEOS-10's at the records' 9.5 °C in water of practical salinity 35 at the pressure and

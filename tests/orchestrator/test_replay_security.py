@@ -122,7 +122,7 @@ def assert_one_line(proc, needle):
     assert len(lines) == 1 and lines[0].startswith("sblsim: error:") and needle in lines[0], proc.stderr
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_a_log_naming_a_model_is_refused_and_never_imported(exported, folders, suffix):
     work, outside = folders
     log = hostile_log(exported[suffix], work, set_receiver(f"model:{outside / 'evil.py'}"))
@@ -132,7 +132,7 @@ def test_a_log_naming_a_model_is_refused_and_never_imported(exported, folders, s
     assert sorted(p.name for p in work.iterdir()) == [log.name]  # nothing written
 
 
-@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.parametrize("suffix", SUFFIXES_FAST_CSV)
 def test_a_relative_model_beside_the_log_is_not_imported(exported, folders, suffix):
     """The log and the model came together and are replayed from their folder: the model stays unread."""
     work, outside = folders

@@ -85,7 +85,7 @@ def _child(tmp_path: Path, mode: str, sig: int) -> subprocess.Popen:
                              stderr=subprocess.PIPE, text=True)
 
 
-@pytest.mark.parametrize("name", SIGNALS)
+@pytest.mark.parametrize("name", [n if n == "SIGINT" else pytest.param(n, marks=pytest.mark.slow) for n in SIGNALS])
 def test_a_signal_handled_inside_a_casadi_call_is_the_stop(tmp_path, name):
     """The handler's KeyboardInterrupt raised inside casadi's ``Function_call`` comes out as casadi's
     NotImplementedError (what the child's command saw); the command line takes it as the stop: 128 + the signal, one

@@ -274,6 +274,7 @@ def test_a_file_too_large_to_read_whole_says_so_and_is_read_from_its_store(detec
     pd.testing.assert_frame_equal(read_any(tmp_path / "s").frame, want)
 
 
+@pytest.mark.slow
 def test_sync_of_a_store_reads_its_sync_tags_alone_and_fits_the_clocks_of_its_file(tmp_path, monkeypatch):
     """``sblsim sync`` on a store asks the store for the deployments' sync tags' rows alone (the animals' never
     read) and fits the same clocks as on the file it was stored from (offsets within a nanosecond: the frame is

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 import sblsim
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.telemetry.study import TAGS_FOLDER
 
 
+@pytest.mark.slow
 def test_tags_named_like_the_studys_files_keep_to_their_folders(tmp_path):
     sim = simulate_study(n_receivers=6, n_tags=2, days=0.1, redeployed=0, seed=4)
     sim.write(tmp_path / "files", "vue")

@@ -83,6 +83,7 @@ def test_every_tag_tracked_and_the_reset_named_in_one_line(runs):
     assert len(said) == 1 and f"receiver {victim} went back 19.99" in said[0] and "\n" not in said[0]
 
 
+@pytest.mark.slow
 def test_every_stray_row_set_aside_and_every_ping_kept(runs):
     (_, clean, _), (_, result, _) = runs
     before = clean.tags.set_index("tag")
@@ -93,6 +94,7 @@ def test_every_stray_row_set_aside_and_every_ping_kept(runs):
         assert after.loc[tag, "set_aside"] == after.loc[tag, "pings"] - before.loc[tag, "pings"] > 0, tag
 
 
+@pytest.mark.slow
 def test_the_tracks_near_the_clean_study_s_and_consistent(runs):
     (sim, clean, _), (_, result, _) = runs
     before, after = _scores(sim, clean), _scores(sim, result)

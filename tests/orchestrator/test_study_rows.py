@@ -110,6 +110,7 @@ def test_a_track_with_no_row_positioned_is_no_track():
                                     "stated interval; 5 heard by 3 receivers or more at once)")
 
 
+@pytest.mark.slow
 def test_a_network_s_thousand_deployments_make_no_thousand_columns(tmp_path):
     """A 9-receiver study in a network of 1,100 more deployments within 4 km, each of which logged another tag once:
     the tag's matrix has the columns of the receivers that heard it, and it is tracked (its line was 1,110 cells,

@@ -84,6 +84,7 @@ def test_water_depth_and_temperature_file_reach_the_tracker(study, capsys):
     assert study_json["water_depth"] == {"source": "given", "water_depth_m": 30.0}
 
 
+@pytest.mark.slow
 def test_each_tag_takes_the_deepest_bottom_of_its_receivers(study):
     """Without ``--water-depth``, the tag's water depth is the deepest ``bottom_depth`` of the deployments whose
     column of its matrix holds an arrival (found here from its ``toa.txt``), its depth held at half of it; the

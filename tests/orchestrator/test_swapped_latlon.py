@@ -16,7 +16,7 @@ import pytest
 BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
 
-@pytest.mark.parametrize("command", ["track", "sync"])
+@pytest.mark.parametrize("command", [pytest.param("track", marks=pytest.mark.slow), "sync"])
 def test_swapped_latitude_and_longitude_are_named(tmp_path, command):
     sheet = pd.read_csv(BOATS / "deployments.csv", dtype=str)
     sheet["deploy_lat"], sheet["deploy_long"] = sheet["deploy_long"].copy(), sheet["deploy_lat"].copy()

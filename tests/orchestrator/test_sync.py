@@ -359,6 +359,7 @@ def test_whole_second_times_are_refused_in_one_line_and_milliseconds_synchronise
     assert "every time is a whole multiple of 1 s (whole seconds" in lines["whole"][0]
 
 
+@pytest.mark.slow
 def test_each_receivers_survey_error_in_the_sync_tags_scores():
     """``survey_sigma`` by receiver (a study on refined positions): the same scores as one σ where each is that σ; one
     receiver's alone enters its own sync tag's σ as its position's error (its place's σ² larger by at least 2 σ²

@@ -52,7 +52,7 @@ def _study(folder: Path, jump: tuple[int, float, float]):
     return sim, truth
 
 
-@pytest.mark.parametrize("size", [0.5, -20.0])
+@pytest.mark.parametrize("size", [0.5, pytest.param(-20.0, marks=pytest.mark.slow)])
 def test_a_clock_jump_found_named_split_and_read_back_by_toa(tmp_path, capsys, size):
     """Receiver R2's clock jumps by +0.5 s (or goes back 20 s) at 2 h: one warning line names R2, the jump
     and its time in UTC (the true instant within the interval it gives); sync.json's ``clock_breaks`` and

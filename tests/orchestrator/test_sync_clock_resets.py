@@ -175,6 +175,7 @@ its span); a part R2 does not have refused in one line."""
         result.correct("R2", logged, part=3)
 
 
+@pytest.mark.slow
 def test_the_simulators_logging_order_goes_back_once_and_is_read_as_a_reset(tmp_path, capsys):
     """``simulate_sync(order="logging")`` with R2's clock going back 20 s: R2's times go back exactly once, at its
     first row after the jump (the truth's ``after``), by the jump less the true time between the two rows on its

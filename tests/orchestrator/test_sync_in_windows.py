@@ -51,6 +51,7 @@ def season(tmp_path_factory):
     return sim, said
 
 
+@pytest.mark.slow
 def test_a_season_in_windows_as_in_one_fit(season, capsys):
     sim, out = season
     windowed, whole = (json.loads((out[d] / "sync.json").read_text()) for d in ("2", "0"))
@@ -70,12 +71,16 @@ def test_a_season_in_windows_as_in_one_fit(season, capsys):
     assert np.allclose(tags[0]["median_error_m"], tags[1].loc[tags[0].index, "median_error_m"], rtol=0.1, atol=0.01)
 
 
-def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(season, tmp_path, capsys):
-    sim, out = season
-    folder = out["2"].parent
+def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(tmp_path, capsys):
+    """On two days of the array (the season's fixture is the slow tier's): windows of 0.75 days."""
+    folder = tmp_path
+    sim = simulate_sync(n_receivers=N, hours=48.0, seed=5, side=700.0, interval=(1200.0, 1800.0))
+    time = sim.time + EPOCH
+    _write(folder, sim, time, np.argsort(time, kind="stable"))
     main(["sync", str(folder / "d.csv"), "--receivers", str(folder / "h.csv"), "--sound-speed", "1480",
-          "--window-days", "1.5", "--out", str(tmp_path / "s")])
-    assert "fitted in 3 windows of 1.5 days (12 h overlap each side)" in capsys.readouterr().out
+          "--window-days", "0.75", "--out", str(tmp_path / "s")])
+    count = int(np.ceil(48.0 / (0.75 * 24.0)))  # the record's two days in windows of 18 h
+    assert f"fitted in {count} windows of 0.75 days (12 h overlap each side)" in capsys.readouterr().out
     for days in ("-1", "400", "nan"):
         code = main(["sync", str(folder / "d.csv"), "--receivers", str(folder / "h.csv"), "--window-days", days,
                      "--out", str(tmp_path / f"r{days}")])

@@ -121,6 +121,7 @@ def test_feet_are_refused_naming_feet(sim, tmp_path, capsys, no_fit):
     assert "look like feet" in line and found == pytest.approx(1 / 3.2808, rel=0.02), line
 
 
+@pytest.mark.slow
 def test_tenths_are_said_against_the_sync_s_residuals(sim, tmp_path, capsys):
     """Tenths of a second on this array (σ 28.9 ms, below a tenth of its 0.57 s crossing: not refused) where the
     sync reaches 0.15 ms: exit 0 and one warning line naming tenths as what limits the clocks; every receiver has

@@ -443,7 +443,7 @@ def test_engines_agree_with_detection_by_snr(fmu_dir, scenario, overrides):
     np.testing.assert_allclose(result.metrics["detected_pct"], share.to_numpy(), rtol=1e-12)
 
 
-@pytest.mark.parametrize("system", ["sbl", "usbl"])
+@pytest.mark.parametrize("system", ["sbl", pytest.param("usbl", marks=pytest.mark.slow)])
 def test_the_eigenray_table_of_a_run(fmu_dir, monkeypatch, system):
     """A semicircle through Munk gets an eigenray table (a random walk, above, gets none): both engines equal to
     1e-9 with it, and the run without it (every eigenray solved) gives the same travel times within 1 µs, the same

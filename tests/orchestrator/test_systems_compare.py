@@ -193,6 +193,7 @@ def test_the_usbl_map_grows_linearly_far_from_the_transceiver_as_distance_times_
     assert east[3] / east[2] == pytest.approx(2.0, rel=0.01) and east[4] / east[3] == pytest.approx(2.0, rel=0.01)
 
 
+@pytest.mark.slow
 def test_map_compare_platform_system_draws_each_system_from_its_defaults(tmp_path, capsys):
     out = tmp_path / "map"
     code = main(["map", "semicircle", "--extent", "20", "--step", "2", "--compare", "platform.system=sbl,lbl,usbl",

@@ -187,7 +187,7 @@ def test_sequential_update_against_filterpy():
     assert np.abs(got_P - ekf.P).max() <= 1e-9 * np.abs(ekf.P).max()
 
 
-@pytest.mark.parametrize("kind", ["ukf", "ekf-seq"])
+@pytest.mark.parametrize("kind", [pytest.param("ukf", marks=pytest.mark.slow), "ekf-seq"])
 def test_ukf_and_ekf_seq_are_consistent_on_simulated_pings(kind):
     """The UKF and the sequential EKF over 20 seeds of simulated pings (Lake Hald's array, 30 % of the arrivals
     heard): the 2-D NEES against the exact truth in [1, 3] (2 if consistent), and the RMS error within 10 % of the

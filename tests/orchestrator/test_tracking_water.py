@@ -122,6 +122,7 @@ def test_a_calibration_the_stated_water_cannot_have_is_replaced_and_said(tmp_pat
     assert abs(speed["calibrated_m_s"] - 1500.0) < 2.0 and not speed["plausible_m_s"][0] <= 1500.0
 
 
+@pytest.mark.slow
 def test_a_tag_among_receivers_in_one_plane_is_held_at_a_stated_depth(tmp_path, capsys):
     """The bay: no depth given, one warning line says the depth is held at the receivers' mean depth (read here with
     pandas) with their span as σ and asks for the water's depth; every row there, none surer; with --water-depth 2,
