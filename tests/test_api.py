@@ -67,6 +67,7 @@ def test_api_run_is_the_cli_run_for_every_receiver(tmp_path, system, receiver):
     assert r.summary["receiver"] == receiver
 
 
+@pytest.mark.slow
 def test_api_run_on_the_fmu_engine_is_the_cli_run(tmp_path, fmu_dir):
     assert_same_run(tmp_path, "spiral", [SHORT, "simulation.receiver=ukf"], seed=2, engine="fmu", fmu_dir=fmu_dir)
 

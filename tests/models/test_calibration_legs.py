@@ -37,6 +37,7 @@ def test_eigenray_gradient_equals_finite_differences(ctd):
     assert np.max(np.abs(gradient - StraightRay().legs(points, x, j)[1])) > 1e-4
 
 
+@pytest.mark.slow
 def test_eigenray_in_isovelocity_water_is_the_straight_ray():
     c = 1490.0
     iso = EigenRay(np.array([[0.0, c], [3000.0, c]]), c, SURFACE_U)

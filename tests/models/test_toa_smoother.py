@@ -116,6 +116,7 @@ def late_cost(theta, toa, receivers, s):
     return float(-2.0 * np.log(p).sum() + (rest**2).sum())
 
 
+@pytest.mark.slow
 def test_with_late_arrivals_modelled_the_smoother_is_a_minimum_of_its_cost():
     """The one-sided delay term (``delay_share`` 0.1, ``delay_mean`` 2 ms, 10 % of the arrivals 1 to 3 ms late):
     the smoother's answer is a minimum of the mixture's cost written again with scipy's Student-t and exponentially

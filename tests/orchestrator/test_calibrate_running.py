@@ -115,6 +115,7 @@ def test_bad_running_settings_are_refused_in_one_line(tmp_path, capsys, item, me
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_a_running_solution_far_from_the_least_squares_is_said_so(survey_a, tmp_path):
     """NCL1's edited log read without its site: the a-priori positions guessed from the log (all three under the
     mean transmit point) lie 600-1300 m from the transponders; one causal pass from a 10 m prior ends hundreds of

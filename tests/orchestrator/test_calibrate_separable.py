@@ -111,6 +111,7 @@ def test_one_circle_is_refused_in_one_line_naming_what_it_cannot_separate(tmp_pa
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_two_radii_separate_them_to_a_centimetre_and_say_how_well(tmp_path):
     truth = _write(tmp_path / "g", (600.0, 2000.0))
     survey, result = _solve(tmp_path / "g")

@@ -161,6 +161,7 @@ def test_replicates_are_reproducible_and_differ():
     assert not np.allclose(a["e_n_m"], other["e_n_m"])
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_replicates_and_the_log(tmp_path, capsys):
     config = tmp_path / "mine.toml"
     config.write_text('[survey]\npattern = "box"\nduration_s = 400.0\n[platform]\ngps_sigma = 0.05\n')

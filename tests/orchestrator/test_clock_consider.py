@@ -93,6 +93,7 @@ def nees_over(seeds: int) -> tuple[float, float]:
     return float(np.mean(alone)), float(np.mean(considered))
 
 
+@pytest.mark.slow
 def test_still_tags_with_clock_errors_are_consistent_with_the_term_over_20_seeds():
     """The pooled covariance alone is far too small (2-D NEES ≫ 2); with the clocks' consider term the mean NEES of
     20 seeds lies where the mean of 20 χ²(2) lies with probability 0.998 ([1, 3.5]: Gamma(20, 0.1))."""

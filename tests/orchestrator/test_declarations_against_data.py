@@ -153,6 +153,7 @@ def _deep_tag(n: int = 60):
     return toa, truth
 
 
+@pytest.mark.slow
 def test_a_tag_depth_the_arrivals_refute_is_refused(tmp_path, capsys):
     """``--tag-depth 60`` for a tag 7-13 m deep: one line naming the depth given, and the depths the free fixes
     show, overlapping the truth's; the check alone keeps the tag's mean depth and its deepest."""

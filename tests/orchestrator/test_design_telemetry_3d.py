@@ -186,6 +186,7 @@ def test_the_3d_walk_is_tracked_in_3d():
     assert depths.min() == pytest.approx(4.0) and depths.max() == pytest.approx(10.0)
 
 
+@pytest.mark.slow
 def test_the_planar_case_is_unchanged():
     """Without the receivers' depths the design is planar: its ``design.json`` is the same whatever the 3-D keys
     say (``detection.depth_sigma_m``) but for the problem's echo; and a 3-D design whose receivers and tag all lie at

@@ -43,6 +43,7 @@ def test_lsq_receiver_runs_the_same_on_both_engines(fmu_dir):
     assert np.abs(ekf["est_x"] - local["est_x"]).max() > 1e-3
 
 
+@pytest.mark.slow
 def test_cli_set_receiver_lsq(tmp_path, capsys):
     assert main(["run", "semicircle", "--set", "receiver=lsq", "--set", "simulation.duration=5",
                  "--out", str(tmp_path / "r")]) == 0

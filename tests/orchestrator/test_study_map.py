@@ -149,6 +149,7 @@ def test_the_north_arrow_points_to_true_north(drawn):
     assert angle < 0 and abs(abs(angle) - abs(convergence)) < 0.01
 
 
+@pytest.mark.slow
 def test_many_tags_not_tracked_fit_beside_the_map(tmp_path):
     outcome, _, _ = _outcome(tmp_path, refused=120)
     fig = study_map(outcome)

@@ -117,6 +117,7 @@ def test_a_gate_line_hears_two_at_once_at_most(tmp_path):
         assert row.reason.endswith("positioning needs 3 at once, and a track at least 3 such pings")
 
 
+@pytest.mark.slow
 def test_whole_second_times_on_clocks_nobody_synchronised(tmp_path):
     """A simulated study's detections rounded down to whole seconds, no sync tag: every tag refused for its times,
     1 s being 1,480 m of range, against the sound's crossing time of the receivers that hear one of its pings (the

@@ -421,6 +421,7 @@ def test_a_file_that_leads_out_of_the_folder_is_refused(folder, tmp_path):
         write_report(folder)
 
 
+@pytest.mark.slow
 def test_the_tags_drawn_are_capped_at_those_with_the_most_rows(rendered, monkeypatch):
     from sblsim.orchestrator.telemetry.report import context
 

@@ -97,6 +97,7 @@ def test_a_clock_jump_found_named_split_and_read_back_by_toa(tmp_path, capsys, s
     assert np.abs(error).max() < 3 * NOISE and np.sqrt(np.mean(error ** 2)) < NOISE
 
 
+@pytest.mark.slow
 def test_the_correction_of_a_broken_receivers_times(tmp_path):
     """``SyncResult.correct`` on R2's own times either side of its +0.5 s jump: each on R0's clock (the truth's
     within 0.5 ms), NaN in the stretch set aside."""

@@ -106,6 +106,7 @@ def test_bad_depths_and_survey_errors_are_refused_in_one_line(tmp_path, capsys, 
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_the_summary_says_the_depth_was_estimated_without_readings(tmp_path):
     toa_path, receivers_path, _, _ = _files(tmp_path)
     pd.read_csv(toa_path).drop(columns=["depth_m"]).to_csv(toa_path, index=False, na_rep="NA")

@@ -101,6 +101,7 @@ def test_a_measured_series_tracks_a_tag_in_water_that_warms(tmp_path):
     assert rms[1] <= 1.05 * rms[0] + 0.01 and rms[2] >= 2 * rms[1], rms
 
 
+@pytest.mark.slow
 def test_where_the_pings_cannot_give_the_speed_the_fallback_is_stated(tmp_path, capsys):
     """Two pings cannot calibrate the speed: TEOS-10's for fresh water at 20 °C (within 0.5 m/s of pure water's
     1,482.35 m/s, Marczak, J. Acoust. Soc. Am. 102, 2776, 1997) is taken with --temperature and --salinity, the
