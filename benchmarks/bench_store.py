@@ -7,10 +7,8 @@ Run:  python benchmarks/bench_store.py [--receivers 20] [--tags 100] [--days 7] 
 Reading: the simulated study of ``benchmarks/bench_telemetry_study.py`` (``--days``, ``--tags``) written as each
 export; in a fresh process each, the file read whole by the readers (:func:`read_detections`: the baseline, refused
 where the file is beyond the whole-file reader's 256 MiB or 3,000,000 rows) and read into a store a piece at a time
-(:func:`sblsim.store`), in one process (``workers=1``: the baseline of the workers) and with its default workers (the
-CPU count, at most 4, for a file of 64 MiB or more): the wall time, the detections per second, the CPU time (the
-workers' included), the command's process's peak memory, the store's size, and the store's time over the whole
-read's and over one process's (the ratios).
+(:func:`sblsim.store`): the wall time, the detections per second, the process's peak memory, the store's size, and
+the store's time over the whole read's (the ratio).
 
 Season (unless ``--no-season``): ``--season-days`` of ``--season-tags`` tags as a VUE export, which ``sblsim track``
 refuses as a file (its size); stored, then tracked from the store (:func:`sblsim.track` on the store's folder,
@@ -22,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import sys
 import tempfile
 import time
@@ -42,12 +39,6 @@ TARGET_RATE = 1e6
 TARGET_PEAK_GIB = 1.0
 
 
-def _cpu_seconds() -> float:
-    """The CPU time [s] of this process and of its children waited for (the store's workers)."""
-    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
-
-
 def _peak_gib() -> float:
     """This process's peak resident memory [GiB] (:func:`bench_memory.peak_bytes`: its own high-water mark)."""
     return peak_bytes() / 2**30
@@ -62,14 +53,12 @@ def _whole(path: str) -> dict:
     return {"seconds": time.perf_counter() - started, "rows": rows, "peak_gib": _peak_gib()}
 
 
-def _stored(path: str, out: str, workers: int | None = None) -> dict:
-    cpu = _cpu_seconds()
+def _stored(path: str, out: str) -> dict:
     started = time.perf_counter()
-    info = sblsim.store(path, out=out, workers=workers).info
+    info = sblsim.store(path, out=out).info
     seconds = time.perf_counter() - started
     size = sum(f.stat().st_size for f in Path(out).rglob("*.parquet"))
-    return {"seconds": seconds, "rows": info["rows"], "peak_gib": _peak_gib(), "store_mib": size / 2**20,
-            "workers": info["workers"], "cpu_s": _cpu_seconds() - cpu}
+    return {"seconds": seconds, "rows": info["rows"], "peak_gib": _peak_gib(), "store_mib": size / 2**20}
 
 
 def _tracked(store: str, files: dict, out: str, workers: int) -> dict:
@@ -93,23 +82,19 @@ def reading(receivers: int, tags: int, days: float, formats: list[str], folder: 
         files = sim.write(folder / format, format)
         path = str(files["detections"])
         whole = _fresh(_whole, path)
-        alone = _fresh(_stored, path, str(folder / f"alone_{format}"), 1)
         stored = _fresh(_stored, path, str(folder / f"store_{format}"))
         rate = stored["rows"] / stored["seconds"]
         row = {"format": format, "detections": stored["rows"], "file_mib": Path(path).stat().st_size / 2**20,
-               "whole": whole, "one_process": alone, "store": stored, "rate_per_s": rate,
-               "ratio": stored["seconds"] / whole["seconds"] if "seconds" in whole else None,
-               "workers_ratio": stored["seconds"] / alone["seconds"]}
+               "whole": whole, "store": stored, "rate_per_s": rate,
+               "ratio": stored["seconds"] / whole["seconds"] if "seconds" in whole else None}
         rows.append(row)
         said = (f"whole {whole['seconds']:.1f} s, peak {whole['peak_gib']:.2f} GiB" if "seconds" in whole
                 else "whole: refused (beyond the file reader's limits)")
         ratio = "-" if row["ratio"] is None else f"{row['ratio']:.2f}"
-        print(f"{format:7s} {row['detections']:>10,} detections {row['file_mib']:7.1f} MiB | {said} | store, one "
-              f"process: {alone['seconds']:.1f} s ({alone['rows'] / alone['seconds']:,.0f}/s, CPU "
-              f"{alone['cpu_s']:.1f} s) | store, {stored['workers']} workers: {stored['seconds']:.1f} s "
-              f"({rate:,.0f}/s, CPU {stored['cpu_s']:.1f} s), peak {stored['peak_gib']:.2f} GiB (its own process), "
-              f"{stored['store_mib']:.1f} MiB | against whole {ratio}, against one process "
-              f"{row['workers_ratio']:.2f}", flush=True)
+        print(f"{format:7s} {row['detections']:>10,} detections {row['file_mib']:7.1f} MiB | {said} | store "
+              f"{stored['seconds']:.1f} s ({rate:,.0f}/s), peak {stored['peak_gib']:.2f} GiB, "
+              f"{stored['store_mib']:.1f} MiB | ratio {ratio}",
+              flush=True)
     return rows
 
 

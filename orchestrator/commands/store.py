@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sblsim.orchestrator.commands.console import output_folder
-from sblsim.orchestrator.io.arguments import check_count, path_argument, prepare_out, text_argument
+from sblsim.orchestrator.io.arguments import path_argument, prepare_out, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.progress import ProgressSpec, check_progress
 from sblsim.orchestrator.readers.formats import FORMATS
@@ -39,7 +39,7 @@ class StoreResult:
 
 
 def store(detections: str | Path, *, out: str | Path, format: str | None = None, force: bool = False,
-          progress: ProgressSpec = False, workers: int | None = None) -> StoreResult:
+          progress: ProgressSpec = False) -> StoreResult:
     """Read a detections file into a store: ``sblsim store``.
 
     Parameters
@@ -56,9 +56,6 @@ def store(detections: str | Path, *, out: str | Path, format: str | None = None,
         Replace an earlier store in ``out``.
     progress : bool, str or callable
         :data:`~sblsim.orchestrator.io.progress.ProgressSpec`, in bytes of the file.
-    workers : int, optional
-        Worker processes reading the file's pieces (1 to 64; default the CPU count, at most 4, for a file of 64 MiB
-        or more, else 1: :func:`~sblsim.orchestrator.store.ingest.ingest`).
 
     Returns
     -------
@@ -78,7 +75,7 @@ def store(detections: str | Path, *, out: str | Path, format: str | None = None,
         format = text_argument(format, "format")
     check_progress(progress)
     target = prepare_out(path_argument(out, "out", optional=False), force, STORE_FILE, "store")
-    return StoreResult(ingest(detections, target, format, progress=progress, workers=workers), target)
+    return StoreResult(ingest(detections, target, format, progress=progress), target)
 
 
 NAME = "store"
@@ -93,9 +90,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the detections' format (default: read from the file's first line)")
     p.add_argument("--out", type=Path, default=None, help="the store's folder (default results/store_NAME)")
     p.add_argument("--force", action="store_true", help="replace an earlier store in --out")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="worker processes reading the file's pieces (default: the cores, at most 4, for a file of 64 "
-                        "MiB or more; else 1)")
 
 
 def lines(info: dict[str, Any], out: Path) -> list[str]:
@@ -116,12 +110,11 @@ def lines(info: dict[str, Any], out: Path) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     """``sblsim store`` from its parsed arguments: its lines printed, its exit status returned."""
-    from sblsim.orchestrator.store.ingest import MAX_WORKERS_ALLOWED, ingest
+    from sblsim.orchestrator.store.ingest import ingest
 
-    workers = None if args.workers is None else check_count(args.workers, "--workers", 1, MAX_WORKERS_ALLOWED)
     out = output_folder(args.out, Path("results") / f"store_{folder_name(args.detections.stem)}", args.force,
                         STORE_FILE, "store")
-    info = ingest(args.detections, out, args.format, progress="auto", workers=workers)
+    info = ingest(args.detections, out, args.format, progress="auto")
     for line in lines(info, out):
         print(line)
     return 0

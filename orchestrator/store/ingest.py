@@ -1,11 +1,13 @@
 """A detections file read into a store (:mod:`sblsim.orchestrator.store`) a piece at a time, in memory bounded by the
 piece, not the file: ``sblsim store``.
 
-The file is read in pieces of about :data:`PIECE_BYTES` bytes (:mod:`.pieces`: each cut at a line's end and read by
-the very reader of :func:`~sblsim.orchestrator.readers.detections.read_detections`, the same cells checked with the
-same rules and errors, naming the file's own lines). A file of :data:`PARALLEL_BYTES` or more has its pieces read
-by worker processes (the CPU count, at most :data:`MAX_WORKERS`) while this process reads the file on and takes
-the pieces read in the file's order; each piece is written on a thread while the next is taken.
+The file is read in pieces of about :data:`PIECE_BYTES` bytes, each cut at a line's end (where the quotes of the piece
+are balanced: a quoted cell spanning lines is never cut; in a Fathom CSV, before a ``DET`` record, so that a
+detection's ``DET_SENS`` records stay with it), and each piece is read by the very reader of
+:func:`~sblsim.orchestrator.readers.detections.read_detections` under the file's header (a Fathom piece under the
+``_DESC`` lines in force there): the same cells checked with the same rules and errors, naming the file's own lines.
+A plain piece is cut into its cells by Arrow's CSV reader (:mod:`.plain`), every other by the text reader's pandas;
+each piece is written on a thread while the next is read.
 What a reader judges over the whole file is carried from piece to piece: each receiver's clock parts (its time going
 back in the file's order: :class:`ClockParts`, as :func:`~sblsim.orchestrator.readers.detections.clock_parts`), the
 encoding (a file not UTF-8 is read again in Latin-1, as the whole-file reader decodes it), the counts of tags and
@@ -19,8 +21,7 @@ into place when complete: :func:`~sblsim.orchestrator.io.output.staged_directory
 and 512 cells, a piece's cells bounded, the file a regular file and no receiver's binary log.
 
 The store's files: ``store.json`` (what was read: the file's name, size and SHA-256, the format, the encoding, the
-rows, each tag's and receiver's detections, the time span, the clock resets, the columns not used, the seconds the
-reading took and the ``workers`` that read its pieces; written last)
+rows, each tag's and receiver's detections, the time span, the clock resets, the columns not used; written last)
 and ``detections/part-NNNNN.parquet``, one per piece, its rows sorted by tag and line (row groups of
 :data:`ROW_GROUP` rows, so that a tag's rows are read alone by their statistics), zstd-compressed.
 """
@@ -29,13 +30,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
-import os
 import shutil
 import time as clock
 from collections import Counter
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
-from contextlib import contextmanager
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterator
 
@@ -45,12 +43,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.io.arguments import check_count
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, check_cells, regular_file
 from sblsim.orchestrator.io.version import installed_version
-from sblsim.orchestrator.readers.binary import refuse_log
+from sblsim.orchestrator.readers import fathom
+from sblsim.orchestrator.readers.binary import not_text, refuse_log
 from sblsim.orchestrator.readers.cells import text_table
 from sblsim.orchestrator.readers.detections import (
     CLOCK_TOLERANCE,
@@ -58,30 +56,30 @@ from sblsim.orchestrator.readers.detections import (
     NETWORKS,
     SORTED,
     check_parts,
+    rows_read,
     sniff_format,
 )
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
-from sblsim.orchestrator.store.pieces import NotUtf8, advance_descs, decoded, in_order, pieces
+from sblsim.orchestrator.store.plain import fathom_detections, plain_body
 
 #: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract peaked at
 #: 0.37-0.38 GiB with it, one piece read while the one before is written; with pandas' parse alone 0.31-0.33 GiB,
 #: 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
 PIECE_BYTES = 8 * 2**20
+#: A Fathom CSV's first piece [bytes]: its ``_DESC`` lines, which the text reader reads (the pieces after them, in the
+#: lines' columns, are read by Arrow: :func:`~.plain.fathom_detections`).
+FIRST_FATHOM_BYTES = 2**16
 #: The smallest piece allowed [bytes].
 MIN_PIECE_BYTES = 4096
-#: The bytes of a file whose pieces are read by worker processes by default, at least [bytes] (a smaller file is read
-#: in this process: a worker's start, about a second, would cost more than it saves).
-PARALLEL_BYTES = 64 * 2**20
-#: The worker processes reading pieces by default at most [1] (this process reads the file, takes the pieces' clock
-#: parts and counts, and writes them: more workers than it can feed would wait).
-MAX_WORKERS = 4
-#: The worker processes a caller may ask for at most [1].
-MAX_WORKERS_ALLOWED = 64
 #: The rows of a Parquet row group [1]: a tag's rows found by the groups' statistics.
 ROW_GROUP = 65536
 _WHAT = "detections"
+
+
+class _NotUtf8(Exception):
+    """A piece that is not UTF-8: the file is read again in Latin-1."""
 
 
 class ClockParts:
@@ -152,37 +150,174 @@ class ClockParts:
         return self.resets
 
 
-def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress,
-            pool: Executor | None, workers: int) -> Iterator[tuple[pd.DataFrame, list[str], set[int]]]:
-    """Each piece's detections (the format's reader, :func:`~.pieces.read_piece`), its header and the header's
-    columns used, in the file's order: read in this process, or in ``pool``'s ``workers`` processes while this one
-    reads the file on (its bytes, their hash, a Fathom file's ``_DESC`` lines in force) and takes the pieces read."""
+def _breaks(data: bytes) -> int:
+    """The line breaks in ``data`` (``\\n``, ``\\r\\n`` or a lone ``\\r``, as pandas ends a row)."""
+    breaks = data.count(b"\n")
+    return breaks + data.count(b"\r") - data.count(b"\r\n") if b"\r" in data else breaks
+
+
+def _cut(data: bytes, fathom_file: bool) -> int:
+    """Where a piece ends in ``data``: after its last line end at which its quotes are balanced (in a Fathom file,
+    before its last ``DET`` record); 0 where there is none."""
+    end = data.rfind(b"\n") + 1
+    if fathom_file:
+        det = max(data.rfind(b"\nDET,", 0, end), data.rfind(b'\n"DET",', 0, end))
+        end = det + 1 if det > 0 else end
+    while end > 0 and b'"' in data and data.count(b'"', 0, end) % 2:
+        end = data.rfind(b"\n", 0, end - 1) + 1
+    return end
+
+
+def pieces(handle, name: str, piece_bytes: int, fathom_file: bool, line: int = 2, *, check: bool = True
+           ) -> Iterator[tuple[bytes, int]]:
+    """The pieces of a file from where ``handle`` stands (after its header; ``line``: the number of the next line),
+    each cut by :func:`_cut`, with the number of its first line in the file; each checked as the whole-file reader
+    checks its text (no NUL byte; with ``check``, its lines' lengths and cells: else the caller's to check, as
+    :func:`_frames` does of a piece not :mod:`.plain`).
+
+    Raises
+    ------
+    ModelError
+        A NUL byte, a line longer than 1 MiB or of too many cells, a quoted cell spanning more than a piece.
+    """
+    rest = b""
+    size = min(piece_bytes, FIRST_FATHOM_BYTES) if fathom_file else piece_bytes  # its _DESC lines in a piece alone
+    while True:
+        data = handle.read(size)
+        size = piece_bytes
+        ended = not data
+        data = rest + data
+        if not data:
+            return
+        end = len(data) if ended else _cut(data, fathom_file)
+        if end == 0:
+            if len(data) > max(piece_bytes, MAX_LINE_BYTES) * 4:
+                raise ModelError(f"{_WHAT}: {name!r} line {line}: no line end where quotes close within "
+                                 f"{len(data) // 2**20} MiB; allowed: lines of at most 1 MiB, a quoted cell closed")
+            rest = data
+            continue
+        piece, rest = data[:end], data[end:]
+        nul = piece.find(b"\0")
+        if nul >= 0:
+            raise not_text(name, _WHAT, piece, nul)
+        if check:
+            check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
+        yield piece, line
+        line += _breaks(piece)
+        if ended:
+            return
+
+
+def _decoded(data: bytes, encoding: str) -> str:
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError:
+        raise _NotUtf8() from None
+
+
+def _last_line(text: str, starts: tuple[str, ...]) -> str | None:
+    """The last line of ``text`` starting with one of ``starts`` (its line end dropped), None where none does."""
+    best = -1
+    for start in starts:
+        at = text.rfind(start)
+        while at > 0 and text[at - 1] != "\n":
+            at = text.rfind(start, 0, at)
+        best = max(best, at)
+    if best < 0:
+        return None
+    end = text.find("\n", best)
+    return text[best:end if end >= 0 else len(text)].rstrip("\r")
+
+
+def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: str
+                  ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
+    """A Fathom piece's ``DET`` (and ``DET_SENS``) tables under the ``_DESC`` lines in force (``descs``, updated
+    from the piece), their rows numbered by the file's lines; None where no ``DET_DESC`` has come yet."""
+    carried = [descs[record] for record in fathom.FATHOM_RECORDS if record in descs]
+    for record in fathom.FATHOM_RECORDS:
+        found = _last_line(text, (f"{record}_DESC,", f'"{record}_DESC",'))
+        if found is not None:
+            descs[record] = found
+    if "DET" not in descs:
+        return None
+    shift = line - (2 + len(carried))  # the piece's first line follows Fathom's first line and the carried lines
+    header, body, lines = fathom.fathom_records("\n".join([head, *carried, text]), name, _WHAT, MAX_DETECTIONS,
+                                                MAX_DETECTION_CELLS)
+    sensors = body.attrs.get("sensors")
+    if sensors is not None:
+        body.attrs["sensors"] = (sensors[0], sensors[1], [k + shift for k in sensors[2]])
+    return header, body, [k + shift for k in lines]
+
+
+def _fathom_plain(head: str, descs: dict[str, str], known: dict, piece: bytes, line: int, name: str
+                  ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
+    """A plain Fathom piece's ``DET`` table (:func:`~.plain.fathom_detections`, parsed by Arrow) under the
+    ``_DESC`` lines in force, as :func:`_fathom_piece` makes it (the same header; the ``DET_SENS`` table it carries
+    empty); None where the piece is not plain (then read by :func:`_fathom_piece`). ``known``: each set of
+    ``_DESC`` lines' tables without records, kept between pieces."""
+    if "DET" not in descs:
+        return None
+    found = fathom_detections(piece)
+    if found is None:
+        return None
+    carried = tuple(descs[record] for record in fathom.FATHOM_RECORDS if record in descs)
+    if carried not in known:
+        known[carried] = fathom.fathom_records("\n".join([head, *carried]), name, _WHAT, MAX_DETECTIONS,
+                                               MAX_DETECTION_CELLS)
+    header, empty, _ = known[carried]
+    read = plain_body(found[0], len(header), 0)
+    if read is None:
+        return None
+    body, at = read
+    if "sensors" in empty.attrs:
+        body.attrs["sensors"] = empty.attrs["sensors"]
+    return header, body, (found[1][at] + line).tolist()
+
+
+def _frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress
+            ) -> Iterator[tuple[pd.DataFrame, list[str], set[int]]]:
+    """Each piece's detections (the format's reader), its header and the header's columns used; a piece of a
+    table of one row a line, UTF-8 and :mod:`.plain`, parsed by Arrow's CSV reader, every other by the text reader."""
     name = str(path)
     with open(path, "rb") as handle:
         first = handle.readline(MAX_LINE_BYTES + 2)
         digest.update(first)
         check_cells(first, name, _WHAT)
-        head = decoded(first, encoding + ("-sig" if encoding == "utf-8" else "")).rstrip("\r\n")
+        head = _decoded(first, encoding + ("-sig" if encoding == "utf-8" else "")).rstrip("\r\n")
+        descs: dict[str, str] = {}
+        known: dict = {}
         header = text_table(head, name, _WHAT, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS)[0] \
             if format != "fathom" and encoding == "utf-8" else None
+        for piece, line in pieces(handle, name, piece_bytes, format == "fathom", check=False):
+            digest.update(piece)
+            progress.update(len(piece))
+            if format == "fathom":
+                read = _fathom_plain(head, descs, known, piece, line, name) if encoding == "utf-8" else None
+            else:
+                found = plain_body(piece, len(header), line) if header is not None else None
+                read = None if found is None else (header, *found)
+            if read is not None:
+                frame, used = rows_read(format, read[0], read[1], read[2], name, _WHAT)
+                yield frame, read[0], used
+                continue
+            check_cells(piece, name, _WHAT, max_cells=MAX_DETECTION_CELLS, first_line=line)
+            text = _decoded(piece, encoding)
+            if format == "fathom":
+                table = _fathom_piece(head, descs, text, line, name)
+                if table is None:
+                    continue
+                header_read, body, lines = table
+            else:
+                header_read, body, lines = text_table(head + "\n" + text, name, _WHAT, MAX_DETECTIONS,
+                                                      first_line=line - 1, max_cells=MAX_DETECTION_CELLS)
+            if not len(body):
+                continue
+            frame, used = rows_read(format, header_read, body, lines, name, _WHAT)
+            yield frame, header_read, used
 
-        def jobs() -> Iterator[tuple]:
-            descs: dict[str, str] = {}
-            for piece, line in pieces(handle, name, piece_bytes, format == "fathom", check=False):
-                digest.update(piece)
-                progress.update(len(piece))
-                before = dict(descs)
-                if format == "fathom":
-                    advance_descs(descs, piece, encoding)
-                yield format, encoding, head, header, before, piece, line, name
 
-        yield from in_order(jobs(), pool, workers)
-
-
-def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress,
-           pool: Executor | None = None, workers: int = 1) -> dict:
-    """Read ``path`` into ``folder`` (the staging folder's ``detections``), its pieces read in ``pool`` (None: in
-    this process); returns ``store.json``'s content."""
+def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: int, progress: Progress) -> dict:
+    """Read ``path`` into ``folder`` (the staging folder's ``detections``); returns ``store.json``'s content."""
     digest = hashlib.sha256()
     clocks = None if format in NETWORKS else ClockParts(str(path))
     tags: Counter = Counter()
@@ -190,7 +325,7 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
     rows, span, ignored, files, columns = 0, [np.inf, -np.inf], None, 0, []
     with ThreadPoolExecutor(1) as writer:  # a piece written while the next is read (Arrow's writing frees the GIL)
         written = None
-        for frame, header, used in _frames(path, format, encoding, piece_bytes, digest, progress, pool, workers):
+        for frame, header, used in _frames(path, format, encoding, piece_bytes, digest, progress):
             if clocks is not None:
                 clocks.add(frame)
             columns = merged_columns(columns, list(frame.columns))
@@ -255,7 +390,7 @@ def check_space(path: Path, out: Path, size: int) -> None:
 
 
 def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piece_bytes: int = PIECE_BYTES,
-           progress: ProgressSpec = False, workers: int | None = None) -> dict:
+           progress: ProgressSpec = False) -> dict:
     """Read a detections file into a store at ``out`` (the module docstring), a piece at a time.
 
     Parameters
@@ -271,10 +406,6 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
         least one line however long, up to 1 MiB).
     progress : bool, str or callable
         :data:`~sblsim.orchestrator.io.progress.ProgressSpec`, in bytes of the file.
-    workers : int, optional
-        Worker processes reading the pieces while this one reads the file on and writes the store (1: every piece in
-        this process). Default: the CPU count, at most :data:`MAX_WORKERS`, for a file of :data:`PARALLEL_BYTES` or
-        more; 1 for a smaller one.
 
     Returns
     -------
@@ -294,27 +425,22 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
     if not isinstance(piece_bytes, int) or piece_bytes < MIN_PIECE_BYTES:
         raise ModelError(f"piece_bytes: {piece_bytes!r} is below {MIN_PIECE_BYTES}; allowed: at least "
                          f"{MIN_PIECE_BYTES} bytes")
-    if workers is not None:
-        workers = check_count(workers, "workers", 1, MAX_WORKERS_ALLOWED)
     refuse_log(path, _WHAT)
     size = regular_file(path, _WHAT)
     format = format or sniff_format(path)
     check_space(path, out, size)
-    if workers is None:
-        workers = min(os.cpu_count() or 1, MAX_WORKERS) if size >= PARALLEL_BYTES else 1
-    with staged_directory(out) as stage, Progress(size, "store", "B", progress) as bar, _pool(workers) as pool:
+    with staged_directory(out) as stage, Progress(size, "store", "B", progress) as bar:
         folder = stage / "detections"
         try:
             for encoding in ("utf-8", "latin-1"):
                 shutil.rmtree(folder, ignore_errors=True)
                 folder.mkdir()
                 try:
-                    summary = _write(path, folder, format, encoding, piece_bytes, bar, pool, workers)
+                    summary = _write(path, folder, format, encoding, piece_bytes, bar)
                     break
-                except NotUtf8:
+                except _NotUtf8:
                     continue
             summary["seconds"] = round(clock.perf_counter() - started, 3)
-            summary["workers"] = workers
             (stage / STORE_FILE).write_text(json.dumps(summary, indent=1) + "\n")
         except OSError as exc:
             raise ModelError(f"--out: {str(out)!r}: the store could not be written ({exc.strerror or exc}); "
@@ -322,29 +448,5 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
     return summary
 
 
-@contextmanager
-def _pool(workers: int) -> Iterator[Executor | None]:
-    """``workers`` spawned worker processes (each ends with this one: :func:`~sblsim.orchestrator.campaign.worker
-    .watch_parent`; Ctrl-C is this process's to handle), stopped where the body fails or is stopped, the pieces under
-    way dropped; None for one worker."""
-    if workers == 1:
-        yield None
-        return
-    from sblsim.orchestrator.campaign.executors import stop_pool
-    from sblsim.orchestrator.campaign.worker import watch_parent
-
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=watch_parent,
-                               initargs=(os.getpid(),))
-    ended = False
-    try:
-        yield pool
-        ended = True
-    finally:
-        if ended:
-            pool.shutdown()
-        else:
-            stop_pool(pool)
-
-
-__all__ = ["ClockParts", "MAX_WORKERS", "MAX_WORKERS_ALLOWED", "MIN_PIECE_BYTES", "PARALLEL_BYTES", "PIECE_BYTES",
-           "ROW_GROUP", "check_space", "ingest", "merged_columns"]
+__all__ = ["ClockParts", "MIN_PIECE_BYTES", "PIECE_BYTES", "ROW_GROUP",
+           "check_space", "ingest", "merged_columns", "pieces"]
