@@ -33,14 +33,21 @@ def _write(folder, sim, time, order) -> None:
                   "y_m": sim.positions[:, 1]}).to_csv(folder / "h.csv", index=False)
 
 
+def _array(folder, hours: float):
+    """``hours`` of the simulated array of :data:`N` receivers (sync tags every 20 to 30 min) written in time order
+    (:func:`_write`); returns the simulation."""
+    sim = simulate_sync(n_receivers=N, hours=hours, seed=5, side=700.0, interval=(1200.0, 1800.0))
+    time = sim.time + EPOCH
+    _write(folder, sim, time, np.argsort(time, kind="stable"))
+    return sim
+
+
 @pytest.fixture(scope="module")
 def season(tmp_path_factory):
     """5 days of a simulated array of 6 receivers (sync tags every 20 to 30 min) as a YAPS table and a receivers
     table, synchronised in windows of 2 days and in one fit."""
     folder = tmp_path_factory.mktemp("season")
-    sim = simulate_sync(n_receivers=N, hours=DAYS * 24, seed=5, side=700.0, interval=(1200.0, 1800.0))
-    time = sim.time + EPOCH
-    _write(folder, sim, time, np.argsort(time, kind="stable"))
+    sim = _array(folder, DAYS * 24)
     said = {}
     for days in ("2", "0"):
         out = folder / f"sync{days}"
@@ -74,9 +81,7 @@ def test_a_season_in_windows_as_in_one_fit(season, capsys):
 def test_the_console_says_the_windows_and_a_window_out_of_range_is_refused(tmp_path, capsys):
     """On two days of the array (the season's fixture is the slow tier's): windows of 0.75 days."""
     folder = tmp_path
-    sim = simulate_sync(n_receivers=N, hours=48.0, seed=5, side=700.0, interval=(1200.0, 1800.0))
-    time = sim.time + EPOCH
-    _write(folder, sim, time, np.argsort(time, kind="stable"))
+    _array(folder, 48.0)
     main(["sync", str(folder / "d.csv"), "--receivers", str(folder / "h.csv"), "--sound-speed", "1480",
           "--window-days", "0.75", "--out", str(tmp_path / "s")])
     count = int(np.ceil(48.0 / (0.75 * 24.0)))  # the record's two days in windows of 18 h
