@@ -5,7 +5,7 @@ own clock (the knots interpolated; a broken clock's segment found by its span). 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -106,6 +106,15 @@ class ClockFit:
         k = np.clip(np.floor((time - self.edges[0]) / width).astype(np.int64), 0, len(self.edges) - 2)
         f = (time - self.edges[k]) / width
         return self.knots[receiver, k] * (1 - f) + self.knots[receiver, k + 1] * f
+
+    def without(self, rows: np.ndarray) -> "ClockFit":
+        """The fit with the clock ``rows`` (R,) bool not synchronised: their knots, drifts and sigmas NaN (their
+        arrivals then on no synchronised clock)."""
+        knots, knot_sigma, drift, drift_sigma = (np.array(a, float) for a in (self.knots, self.knot_sigma,
+                                                                               self.drift, self.drift_sigma))
+        for values in (knots, knot_sigma, drift, drift_sigma):
+            values[np.asarray(rows, bool)] = np.nan
+        return replace(self, knots=knots, knot_sigma=knot_sigma, drift=drift, drift_sigma=drift_sigma)
 
 
 __all__ = ["ClockFit"]

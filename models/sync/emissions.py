@@ -76,17 +76,30 @@ def sync_emissions(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, gap:
     return emission, duplicate, heard_by[emission] < 2
 
 
+#: The emissions a receiver must share with another receiver for its clock to be determined: an offset and a drift
+#: (a line) need two points; one leaves the drift free (the clocks' normal equations singular).
+MIN_SHARED = 2
+
+
 def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
     """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (the
-    connected components of the graph linking the receivers that hear one emission)."""
+    connected components of the graph linking the receivers that hear one emission), each sharing
+    :data:`MIN_SHARED` emissions or more with the others so tied (a receiver that shares fewer is left out, and the
+    count of the others is taken again without it)."""
     order = np.lexsort((receiver, emission))
     e, r = emission[order], receiver[order]
-    same = np.flatnonzero(e[1:] == e[:-1])
+    while True:
+        same = np.flatnonzero(e[1:] == e[:-1])
+        pair = np.zeros(len(e), bool)  # each row heard with another receiver (one row per receiver and emission)
+        pair[same] = pair[same + 1] = True
+        shared = np.bincount(r[pair], minlength=n_receivers)
+        few = (shared > 0) & (shared < MIN_SHARED)
+        if not few.any():
+            break
+        e, r = e[~few[r]], r[~few[r]]
     graph = sp.csr_matrix((np.ones(len(same)), (r[same], r[same + 1])), shape=(n_receivers, n_receivers))
     _, roots = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    heard = np.zeros(n_receivers, bool)
-    heard[np.unique(r[np.r_[same, same + 1]])] = True
-    return (roots == roots[start]) & heard
+    return (roots == roots[start]) & (shared >= MIN_SHARED)
 
 
-__all__ = ["connected", "group_emissions", "later_duplicates", "sync_emissions"]
+__all__ = ["MIN_SHARED", "connected", "group_emissions", "later_duplicates", "sync_emissions"]

@@ -116,4 +116,18 @@ def _at_arrivals(receiver: np.ndarray, time: np.ndarray, knots: np.ndarray, edge
     return np.where(n > 0, np.sqrt(total / np.maximum(n, 1)), np.nan)
 
 
-__all__ = ["MAD_FACTOR", "MIN_ARRIVALS", "NOISE_RANGE", "ReceiverNoise", "receiver_noise"]
+def undetermined(rows: np.ndarray, time: np.ndarray, knot_sigma: np.ndarray, edges: np.ndarray,
+                 limit: float) -> np.ndarray:
+    """(R,) bool, the clock rows whose offset is not determined where their arrivals are: the RMS of its sigma at
+    their times (as :class:`ReceiverNoise`'s ``clock``) above ``limit`` [s] (e.g. a clock tied to the others by one
+    sync-tag arrival, its drift then free: its offset's sigma grows without bound away from it). ``rows`` (n,) int
+    each arrival's clock row (−1: none), ``time`` (n,) its time on the fit's base [s], ``knot_sigma`` (R, K + 1) [s]
+    (NaN where not computed: never counted undetermined), ``edges`` (K + 1,) [s]."""
+    rows = np.asarray(rows, np.int64)
+    on = rows >= 0
+    where = _at_arrivals(rows[on], np.asarray(time, float)[on], np.asarray(knot_sigma, float),
+                         np.asarray(edges, float), len(knot_sigma))
+    return np.isfinite(where) & (where > limit)
+
+
+__all__ = ["MAD_FACTOR", "MIN_ARRIVALS", "NOISE_RANGE", "ReceiverNoise", "receiver_noise", "undetermined"]

@@ -32,7 +32,7 @@ from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
-from sblsim.models.sync.emissions import connected, sync_emissions
+from sblsim.models.sync.emissions import MIN_SHARED, connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
@@ -317,12 +317,13 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         start = index[reference]
     linked = connected(receiver[used], emission[used], n_receivers, start)
     if not linked[start]:
-        raise ModelError(f"reference: receiver {names[start]} hears no sync-tag emission that another receiver hears; "
-                         "allowed: a receiver that can be synchronised")
+        raise ModelError(f"reference: receiver {names[start]} shares fewer than {MIN_SHARED} sync-tag emissions with "
+                         "another receiver; allowed: a receiver that can be synchronised")
     left_out = [names[j] for j in range(n_receivers) if not linked[j]]
     if left_out:
-        notes.append("receivers that cannot be synchronised (they hear no sync-tag emission another synchronised "
-                     f"receiver hears), left out: {', '.join(left_out)}")
+        notes.append(f"receivers that cannot be synchronised (they share fewer than {MIN_SHARED} sync-tag emissions "
+                     f"with the synchronised receivers: an offset and a drift need two), left out: "
+                     f"{', '.join(left_out)}")
     width = bin_hours * 3600.0
     timings = {} if timings is None else timings
     timings["grouping"] = clock.perf_counter() - started
@@ -339,6 +340,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                           timings=timings, part=part)
     # a break within a few arrivals of a clock's end (too near to fit a segment): its times from there set aside
     fit, ends = cut_ends(fit, receiver, emission, time, distance, slowness, used, tag)
+    fit, lost, note = segments.without_undetermined(fit, receiver, time, used, names)
+    linked &= ~lost
+    notes.extend([note] if note else [])
     identified = fits = None
     if refine_positions:  # refined only where the sync tags determine the positions; else refused
         args = (receiver, tag, emission, time, distance, slowness, used, start, width)

@@ -34,6 +34,30 @@ def clock_rows(fit: ClockFit, receiver: np.ndarray) -> tuple[np.ndarray, np.ndar
     return fit.clock, fit.site
 
 
+def without_undetermined(fit: ClockFit, receiver: np.ndarray, time: np.ndarray, used: np.ndarray,
+                         names: list[str]) -> tuple[ClockFit, np.ndarray, str | None]:
+    """The fit with each clock row its sync-tag arrivals do not determine not synchronised
+    (:func:`~sblsim.models.sync.noise.undetermined`: its offset's sigma at its ``used`` arrivals above
+    :data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`'s largest, the most ``clock_sigma_s`` may say; e.g. one
+    arrival ties it to the others and its drift is free), the receivers (R,) bool none of whose rows is left
+    synchronised, and a note naming them (None where every clock is determined)."""
+    from sblsim.models.sync.noise import undetermined
+    from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE
+
+    rows, site = clock_rows(fit, receiver)
+    lost = undetermined(np.where(used, rows, -1), time, fit.knot_sigma, fit.edges, CLOCK_SIGMA_RANGE[1])
+    if not lost.any():
+        return fit, np.zeros(len(names), bool), None
+    kept = np.bincount(site[~lost], minlength=len(names)) > 0
+    gone = np.bincount(site[lost], minlength=len(names)) > 0
+    count = np.bincount(np.where(used, rows, -1)[used], minlength=len(lost))
+    said = [f"{names[site[r]]} ({count[r]} arrival{'s' if count[r] != 1 else ''})" for r in np.flatnonzero(lost)]
+    note = (f"receivers whose clock the sync-tag arrivals do not determine (its offset's sigma at them above "
+            f"{CLOCK_SIGMA_RANGE[1]:g} s: its drift free), not synchronised, their detections set aside: "
+            + ", ".join(said))
+    return fit.without(lost), gone & ~kept, note
+
+
 def segment_numbers(fit: ClockFit) -> np.ndarray:
     """(rows,) int, each clock row's segment among its receiver's, 1 first (1 everywhere where no clock broke)."""
     if fit.site is None:

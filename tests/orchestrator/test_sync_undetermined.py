@@ -1,0 +1,79 @@
+"""A receiver whose clock the sync-tag arrivals do not determine: one emission shared with the others leaves its
+drift free (sblsim.models.sync.emissions ``connected``: two at least; the clocks' normal equations were singular, a
+traceback), and a clock whose offset's sigma at its arrivals exceeds what ``clock_sigma_s`` may say
+(sblsim.models.sync.noise ``undetermined``, orchestrator/sync/segments.py ``without_undetermined``) is not
+synchronised either. Each is said and its detections set aside, rather than written with a ``clock_sigma_s`` of hours
+that a study's own ``receivers.csv`` then refuses (16 simulated receivers with 3 sync tags: every tag of the study
+was refused so)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.sync.emissions import connected
+from sblsim.models.sync.noise import undetermined
+from sblsim.models.sync.simulate import simulate_sync
+from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE
+from sblsim.orchestrator.readers.detections import Detections
+from sblsim.orchestrator.sync.run import synchronise
+
+EPOCH = 1_700_000_000
+
+
+def test_a_clock_is_undetermined_where_its_offsets_sigma_at_its_arrivals_is_beyond_the_limit():
+    """Against the RMS computed here: each row's variance interpolated linearly in time between its bin's edges,
+    averaged over its arrivals; a row without arrivals, or without sigmas (NaN), is never undetermined."""
+    edges = np.array([0.0, 10.0, 20.0])
+    sigma = np.array([[0.1, 0.1, 0.1], [0.5, 2.0, 4.0], [np.nan, np.nan, np.nan], [0.0, 0.0, 0.0]])
+    rows = np.array([0, 1, 1, 2, -1, 0])
+    time = np.array([5.0, 2.0, 15.0, 4.0, 3.0, 19.0])
+    at_2 = 0.8 * 0.5**2 + 0.2 * 2.0**2
+    at_15 = 0.5 * 2.0**2 + 0.5 * 4.0**2
+    rms = np.sqrt((at_2 + at_15) / 2)  # 2.5
+    assert undetermined(rows, time, sigma, edges, rms - 1e-9).tolist() == [False, True, False, False]
+    assert undetermined(rows, time, sigma, edges, rms + 1e-9).tolist() == [False, False, False, False]
+
+
+def test_a_receiver_sharing_one_emission_is_not_connected_and_the_count_is_taken_again_without_it():
+    """Receivers 0-1-2 share emissions 1 to 3; receiver 3 shares emission 4 with 0 alone, and receiver 4 emission 5
+    with 3 alone: 3 shares one with the tied receivers (4's only link is 3, so 4 goes too); receiver 5 hears alone."""
+    receiver = np.array([0, 1, 2, 0, 1, 0, 2, 3, 0, 4, 3, 5])
+    emission = np.array([1, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6])
+    assert connected(receiver, emission, 6, 0).tolist() == [True, True, True, False, False, False]
+    twice = np.r_[receiver, 3, 0, 4, 3], np.r_[emission, 7, 7, 8, 8]  # each of 3 and 4 a second one
+    assert connected(*twice, 6, 0).tolist() == [True, True, True, True, True, False]
+
+
+def _frame(sim, keep: np.ndarray) -> Detections:
+    t = sim.time[keep] + EPOCH
+    frame = pd.DataFrame({"receiver": [f"R{j}" for j in sim.receiver[keep]], "tag": [f"S{i}" for i in sim.tag[keep]],
+                          "time": t, "sensor_value": np.nan, "sensor_unit": "", "line": np.arange(len(t)) + 2})
+    return Detections(frame, "simulated", "yaps")
+
+
+def test_a_receiver_tied_by_one_arrival_is_not_synchronised_and_the_others_are_as_without_it():
+    """6 simulated receivers, 3 h; R5 has no sync tag of its own and hears one emission of the others: the sync says
+    so in a note, R5 is not synchronised (its arrival's reason, the receivers' table), every ``clock_sigma_s``
+    written is within what a receivers file may say, and the other clocks are those of the sync without R5's
+    arrival at all."""
+    sim = simulate_sync(n_receivers=6, hours=3.0, seed=5, noise=0.15e-3, echo_share=0.0)
+    at_r5 = np.flatnonzero((sim.receiver == 5) & (sim.tag != 5))
+    keep = (sim.tag != 5) & ((sim.receiver != 5) | (np.arange(len(sim.time)) == at_r5[len(at_r5) // 2]))
+    hydrophones = pd.DataFrame({"receiver": [f"R{j}" for j in range(6)],
+                                "sync_tag": [f"S{j}" if j != 5 else "" for j in range(6)],
+                                "x": sim.positions[:, 0], "y": sim.positions[:, 1], "z": np.nan})
+    got = synchronise(_frame(sim, keep), hydrophones, sound_speed=sim.sound_speed, reference="R0",
+                      leave_one_out=False)
+    said = [n for n in got.summary.get("notes", []) if "cannot be synchronised" in n]
+    assert len(said) == 1 and said[0].endswith("left out: R5") and "fewer than 2 sync-tag emissions" in said[0]
+    assert not got.receivers.set_index("receiver").loc["R5", "synchronised"]
+    assert (got.residuals.loc[got.residuals["receiver"] == "R5", "reason"] == "not synchronised").all()
+    clock = got.offsets["clock_sigma_s"].to_numpy(float)
+    assert ((clock >= CLOCK_SIGMA_RANGE[0]) & (clock <= CLOCK_SIGMA_RANGE[1])).all(), got.offsets
+    assert "R5" not in set(got.offsets["receiver"]) or got.offsets.loc[got.offsets["receiver"] == "R5",
+                                                                       "offset_start_s"].isna().all()
+    alone = synchronise(_frame(sim, keep & (sim.receiver != 5)), hydrophones.iloc[:5], sound_speed=sim.sound_speed,
+                        reference="R0", leave_one_out=False)
+    mine = got.offsets[got.offsets["receiver"] != "R5"].reset_index(drop=True)
+    np.testing.assert_allclose(mine["offset_start_s"], alone.offsets["offset_start_s"], rtol=0, atol=1e-9)
