@@ -4,7 +4,8 @@ A sync tag's arrivals at every receiver, in time order, are one emission while t
 receivers' clocks differ by less than a third of the tag's burst interval); a receiver's later arrival of an
 emission it already logged is a multipath echo or a false detection; an emission heard by one receiver alone ties
 no clock to another. The receivers the clocks' fit (:func:`sblsim.models.sync.clocks.fit_clocks`) can synchronise
-are those connected to the reference through emissions heard by two receivers or more. Times in seconds [s].
+are those connected to the reference through emissions heard by two receivers or more, each sharing two such
+emissions at least (:data:`MIN_SHARED`: an offset and a drift). Times in seconds [s].
 """
 
 from __future__ import annotations
