@@ -50,7 +50,8 @@ def without_undetermined(fit: ClockFit, receiver: np.ndarray, time: np.ndarray, 
         return fit, np.zeros(len(names), bool), None
     kept = np.bincount(site[~lost], minlength=len(names)) > 0
     gone = np.bincount(site[lost], minlength=len(names)) > 0
-    count = np.bincount(np.where(used, rows, -1)[used], minlength=len(lost))
+    held = rows[used & (rows >= 0)]  # (an arrival set aside at a break is on no row)
+    count = np.bincount(held, minlength=len(lost))
     said = [f"{names[site[r]]} ({count[r]} arrival{'s' if count[r] != 1 else ''})" for r in np.flatnonzero(lost)]
     note = (f"receivers whose clock the sync-tag arrivals do not determine (its offset's sigma at them above "
             f"{CLOCK_SIGMA_RANGE[1]:g} s: its drift free), not synchronised, their detections set aside: "

@@ -50,6 +50,26 @@ def test_a_receiver_sharing_one_emission_is_not_connected_and_the_count_is_taken
     assert connected(*twice, 6, 0).tolist() == [True, True, True, True, True, False]
 
 
+def test_a_clock_segment_undetermined_is_named_and_its_receiver_kept_where_another_segment_holds():
+    """A receiver whose clock broke (two rows, an arrival set aside between them): its second segment's sigma beyond a
+    second is not synchronised (its knots NaN) and named with its arrivals' count, the receiver still synchronised by
+    its first; a receiver whose only row is undetermined is not."""
+    from sblsim.models.sync.clock_fit import ClockFit
+    from sblsim.orchestrator.sync.segments import without_undetermined
+
+    sigma = np.array([[1e-4, 1e-4], [5.0, 5.0], [1e-4, 1e-4], [3.0, 3.0]])  # rows: A, A after its break, B, C
+    n = np.zeros(6)
+    fit = ClockFit(np.array([0.0, 10.0]), np.zeros((4, 2)), sigma, np.zeros((4, 1)), np.zeros((4, 1)),
+                   np.ones((4, 1), int), np.zeros(6), n, n, np.ones(6, bool), np.full(4, 1e-4), None, None, 1,
+                   site=np.array([0, 0, 1, 2]), clock=np.array([0, -1, 1, 1, 2, 3]))
+    receiver = np.array([0, 0, 0, 0, 1, 2])
+    time = np.array([1.0, 5.0, 6.0, 7.0, 2.0, 3.0])
+    got, gone, note = without_undetermined(fit, receiver, time, np.ones(6, bool), ["A", "B", "C"])
+    assert gone.tolist() == [False, False, True]
+    assert note.endswith("set aside: A (2 arrivals), C (1 arrival)"), note
+    assert np.isnan(got.knots[[1, 3]]).all() and np.isfinite(got.knots[[0, 2]]).all()
+
+
 def _frame(sim, keep: np.ndarray) -> Detections:
     t = sim.time[keep] + EPOCH
     frame = pd.DataFrame({"receiver": [f"R{j}" for j in sim.receiver[keep]], "tag": [f"S{i}" for i in sim.tag[keep]],
