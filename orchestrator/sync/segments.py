@@ -23,6 +23,8 @@ import numpy as np
 
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.end_breaks import EndBreak
+from sblsim.models.sync.noise import undetermined
+from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE
 from sblsim.orchestrator.io.times import iso_utc
 
 
@@ -41,9 +43,6 @@ def without_undetermined(fit: ClockFit, receiver: np.ndarray, time: np.ndarray, 
     :data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`'s largest, the most ``clock_sigma_s`` may say; e.g. one
     arrival ties it to the others and its drift is free), the receivers (R,) bool none of whose rows is left
     synchronised, and a note naming them (None where every clock is determined)."""
-    from sblsim.models.sync.noise import undetermined
-    from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE
-
     rows, site = clock_rows(fit, receiver)
     lost = undetermined(np.where(used, rows, -1), time, fit.knot_sigma, fit.edges, CLOCK_SIGMA_RANGE[1])
     if not lost.any():
