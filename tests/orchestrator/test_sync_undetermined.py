@@ -41,12 +41,13 @@ def test_a_clock_is_undetermined_where_its_offsets_sigma_at_its_arrivals_is_beyo
 
 
 def test_a_receiver_sharing_one_emission_is_not_connected_and_the_count_is_taken_again_without_it():
-    """Receivers 0-1-2 share emissions 1 to 3; receiver 3 shares emission 4 with 0 alone, and receiver 4 emission 5
-    with 3 alone: 3 shares one with the tied receivers (4's only link is 3, so 4 goes too); receiver 5 hears alone."""
+    """Receivers 0-1-2 share emissions 1 to 3; receiver 3 shares emission 4 with 0 and emission 5 with 4, receiver 4
+    emission 5 alone: 4 shares one and is left out, then, counted again without it, 3 shares one (with 0) and goes
+    too; receiver 5 hears alone. With a second emission for each of 3 and 4 all five are tied."""
     receiver = np.array([0, 1, 2, 0, 1, 0, 2, 3, 0, 4, 3, 5])
     emission = np.array([1, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6])
     assert connected(receiver, emission, 6, 0).tolist() == [True, True, True, False, False, False]
-    twice = np.r_[receiver, 3, 0, 4, 3], np.r_[emission, 7, 7, 8, 8]  # each of 3 and 4 a second one
+    twice = np.r_[receiver, 3, 0, 4, 3], np.r_[emission, 7, 7, 8, 8]
     assert connected(*twice, 6, 0).tolist() == [True, True, True, True, True, False]
 
 
