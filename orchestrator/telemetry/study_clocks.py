@@ -52,6 +52,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
+            # and why a receiver is not synchronised (its notes that name one)
+            notes.extend(n for n in s.get("notes", []) if any(r in n for r in s["not_synchronised"]))
             info = {"source": "synchronised here", "reference_receiver": s["reference_receiver"],
                     "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
                     "clock_breaks": s["clock_breaks"],

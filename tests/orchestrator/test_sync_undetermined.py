@@ -109,8 +109,9 @@ def test_a_receiver_tied_by_one_arrival_is_not_synchronised_and_the_others_are_a
 def test_a_study_of_few_sync_tags_tracks_every_tag_without_the_receiver_it_cannot_synchronise(tmp_path):
     """The simulated study that found it (16 receivers, 3 of them with a sync tag, 2 animals, 6 hours, seed 6):
     receiver 461012 shares one sync-tag emission with the others and is not synchronised (``study.json``'s
-    ``clocks.not_synchronised``), and both tags are tracked (before: both refused, their ``receivers.csv``'s
-    ``clock_sigma_s`` 22,957 s out of range), each within 0.5 m RMS of its simulated path."""
+    ``clocks.not_synchronised``, and the synchronisation's note saying why among the study's), and both tags are
+    tracked (before: both refused, their ``receivers.csv``'s ``clock_sigma_s`` 22,957 s out of range), each within
+    0.5 m RMS of its simulated path."""
     sim = simulate_study(n_receivers=16, n_tags=2, days=0.25, redeployed=0, seed=6)
     files = sim.write(tmp_path / "in", "vue")
     sheet = pd.read_csv(files["deployments"], dtype=str, keep_default_na=False)
@@ -119,6 +120,8 @@ def test_a_study_of_few_sync_tags_tracks_every_tag_without_the_receiver_it_canno
     result = sblsim.track(files["detections"], receivers=tmp_path / "deployments.csv", tags=files["tags"],
                           workers=2, out=tmp_path / "study")
     assert result.summary["clocks"]["not_synchronised"] == ["461012"], result.summary["clocks"]
+    said = [n for n in result.summary["notes"] if "cannot be synchronised" in n]
+    assert len(said) == 1 and said[0].endswith("left out: 461012"), result.summary["notes"]
     assert (result.tags["status"] == "tracked").all(), result.tags["reason"].tolist()
     reference = result.summary["clocks"]["reference_receiver"]
     k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
