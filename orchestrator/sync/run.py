@@ -321,7 +321,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                          "another receiver; allowed: a receiver that can be synchronised")
     left_out = [names[j] for j in range(n_receivers) if not linked[j]]
     if left_out:
-        notes.append(f"receivers that cannot be synchronised (they share fewer than {MIN_SHARED} sync-tag emissions "
+        notes.append(f"{segments.NOT_SYNCHRONISED} (they share fewer than {MIN_SHARED} sync-tag emissions "
                      f"with the synchronised receivers: an offset and a drift need two), left out: "
                      f"{', '.join(left_out)}")
     width = bin_hours * 3600.0

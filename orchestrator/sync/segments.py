@@ -36,6 +36,10 @@ def clock_rows(fit: ClockFit, receiver: np.ndarray) -> tuple[np.ndarray, np.ndar
     return fit.clock, fit.site
 
 
+#: How a synchronisation's notes of the receivers it could not synchronise begin (a study takes them among its own).
+NOT_SYNCHRONISED = "receivers that cannot be synchronised"
+
+
 def without_undetermined(fit: ClockFit, receiver: np.ndarray, time: np.ndarray, used: np.ndarray,
                          names: list[str]) -> tuple[ClockFit, np.ndarray, str | None]:
     """The fit with each clock row its sync-tag arrivals do not determine not synchronised
@@ -44,17 +48,16 @@ def without_undetermined(fit: ClockFit, receiver: np.ndarray, time: np.ndarray, 
     arrival ties it to the others and its drift is free), the receivers (R,) bool none of whose rows is left
     synchronised, and a note naming them (None where every clock is determined)."""
     rows, site = clock_rows(fit, receiver)
-    lost = undetermined(np.where(used, rows, -1), time, fit.knot_sigma, fit.edges, CLOCK_SIGMA_RANGE[1])
+    rows = np.where(used, rows, -1)  # each used arrival's row (−1: not used, or set aside at a break)
+    lost = undetermined(rows, time, fit.knot_sigma, fit.edges, CLOCK_SIGMA_RANGE[1])
     if not lost.any():
         return fit, np.zeros(len(names), bool), None
     kept = np.bincount(site[~lost], minlength=len(names)) > 0
     gone = np.bincount(site[lost], minlength=len(names)) > 0
-    held = rows[used & (rows >= 0)]  # (an arrival set aside at a break is on no row)
-    count = np.bincount(held, minlength=len(lost))
+    count = np.bincount(rows[rows >= 0], minlength=len(lost))
     said = [f"{names[site[r]]} ({count[r]} arrival{'s' if count[r] != 1 else ''})" for r in np.flatnonzero(lost)]
-    note = (f"receivers whose clock the sync-tag arrivals do not determine (its offset's sigma at them above "
-            f"{CLOCK_SIGMA_RANGE[1]:g} s: its drift free), not synchronised, their detections set aside: "
-            + ", ".join(said))
+    note = (f"{NOT_SYNCHRONISED} (the sync-tag arrivals do not determine their clock: its offset's sigma at them "
+            f"above {CLOCK_SIGMA_RANGE[1]:g} s, its drift free), their detections set aside: " + ", ".join(said))
     return fit.without(lost), gone & ~kept, note
 
 

@@ -14,6 +14,7 @@ from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.run import synchronise
+from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
@@ -52,8 +53,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
-            # and why a receiver is not synchronised (its notes that name one)
-            notes.extend(n for n in s.get("notes", []) if any(r in n for r in s["not_synchronised"]))
+            # and why a receiver is not synchronised
+            notes.extend(n for n in s.get("notes", []) if n.startswith(NOT_SYNCHRONISED))
             info = {"source": "synchronised here", "reference_receiver": s["reference_receiver"],
                     "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
                     "clock_breaks": s["clock_breaks"],
