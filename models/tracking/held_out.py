@@ -55,11 +55,12 @@ class HeldOut:
 
 def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: float | np.ndarray,
              sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS, dof: float = ROBUST_DOF,
-             biases: bool = False, anchored: tuple[np.ndarray, np.ndarray] | None = None,
-             speed_sigma: float | None = None) -> HeldOut:
+             biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
+             speed_sigma: float | None = None, times: np.ndarray | None = None,
+             edges: np.ndarray | None = None) -> HeldOut:
     """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
     the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
-    anchored pings in every refinement, the refined array's times less its biases); the
+    anchored pings in every refinement, the refined array's times less its biases at the pings' ``times``); the
     blocks' pings fixed with every arrival (no gate: a receiver's error is what is measured), each from its place or
     the fix's own start (the better), their depth kept at the places' in 3-D.
 
@@ -73,21 +74,23 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
         As :func:`refine_receivers`, for a block left out.
     """
     toa, receivers, places, c, sigma = checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma)
+    times = None if times is None else np.asarray(times, float)
     usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= MIN_ARRIVALS)
     per_fold, pooled = [], [[], []]
     for block in np.array_split(usable, folds):
         keep = np.ones(len(toa), bool)
         keep[block] = False
         refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
-                                   anchored, speed_sigma)
+                                   anchored, speed_sigma, None if times is None else times[keep], edges)
         moved = receivers.copy()
         moved[:, :2] += refined.shift
         # the refined array's times less its receivers' range biases (where determined, as its shifts), at its speed
         speed = c[block] * refined.speed_scale
-        corrected = toa[block] - np.where(refined.determined, refined.bias, 0.0)[None] / speed[:, None]
+        bias = refined.bias_at(None if times is None else times[block], len(block))
+        corrected = toa[block] - np.where(refined.determined[None], bias, 0.0) / speed[:, None]
         medians = []
-        for k, (array, times, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
-            ratio = best_fixes(times, array, places[block], at, sigma)[2]
+        for k, (array, arrivals, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
+            ratio = best_fixes(arrivals, array, places[block], at, sigma)[2]
             pooled[k].append(ratio)
             medians.append(np.nanmedian(ratio) if np.isfinite(ratio).any() else np.nan)
         per_fold.append(medians)

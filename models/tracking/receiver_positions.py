@@ -7,14 +7,17 @@ as surveyed). The pings' horizontal places and emission times and the shifts are
 with a prior ``d_i ~ N(0, σ₀² I)`` (the survey's σ per axis), the tag's depth kept at its start (a sensor's, or the
 fix's in 3-D); each arrival weighed by its Student-t weight ``(ν + 1) / (ν + z²)`` (a late multipath arrival counts
 little; iteratively reweighted). The pings are eliminated ping by ping (three unknowns each, Schur's complement),
-leaving the shifts' normal matrix, ``2R × 2R``: a record's cost is linear in its pings.
+leaving the receivers' normal matrix (:mod:`sblsim.models.tracking.refinement_terms`): a record's cost is linear in
+its pings.
 
 Where asked, three more kinds of unknowns join them: each receiver's **range bias** ``β_i`` [m] (``toa_ij = t_j +
-(‖p_j − (r_i + d_i)‖ + β_i) / c_j``, the same prior: a constant offset of its clock, as a synchronisation made on
-wrong positions leaves it); **anchored pings**, emitted where a receiver is (a sync tag at its receiver: its place
-moves with that receiver, its emission time its only unknown of its own), which tell a receiver's clock from its place
-(both directions of each pair of receivers are heard); and the **sound speed's scale** ``m`` (``c_j / m``, a prior on
-``m``), where the sound speed was calibrated from the same pings on the surveyed positions and took up their error.
+(‖p_j − (r_i + d_i)‖ + β_i) / c_j``, the same prior: the offset a synchronisation made on wrong positions leaves its
+clock, a constant or, given the synchronisation's bins' edges, linear in time between knots at them as its clocks
+are: with few sync tags the error changes from bin to bin with the sync tags a receiver hears); **anchored pings**,
+emitted where a receiver is (a sync tag at its receiver: its place moves with that receiver, its emission time its
+only unknown of its own), which tell a receiver's clock from its place (both directions of each pair of receivers
+are heard); and the **sound speed's scale** ``m`` (``c_j / m``, a prior on ``m``), where the sound speed was
+calibrated from the same pings on the surveyed positions and took up their error.
 
 A ping heard by three receivers (two coordinates and a time) adds nothing: only pings with at least four arrivals
 are fitted. What the pings determine is the array's **shape**: a translation or a rotation of the whole array with
@@ -45,7 +48,8 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, shape_sigma_ratio
 from sblsim.models.tracking.fix import fix_pings
-from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
+from sblsim.models.tracking.refinement_terms import Anchored, Normal, Unknowns, ping_terms, solve
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF
 from sblsim.models.tracking.toa import checked_sigma
 
 #: Arrivals a ping needs to be fitted (two coordinates and an emission time, and one more to say anything).
@@ -53,8 +57,6 @@ MIN_ARRIVALS = 4
 #: The fit's iterations at most, and the largest shift's step [m] at which it has converged (a millimetre: the
 #: arrivals' weights still move a little from one step to the next where an arrival's residual is near √ν σ).
 ITERATIONS, STEP_TOLERANCE = 50, 1e-3
-#: Pings per chunk of the elimination (a chunk's (pings, R, R) products stay small).
-CHUNK = 4096
 #: A ping whose fix at the surveyed positions fits this many times worse than the median ping's (χ² per degree of
 #: freedom) is left out of the refinement: a fix in a mirror place or of echoes, no start for Gauss-Newton.
 START_GATE = 25.0
@@ -88,11 +90,14 @@ class Refinement:
     iterations : int
     converged : bool
     bias, bias_sigma : numpy.ndarray
-        (R,) [m] each receiver's range bias and its σ (0 where not fitted).
+        (R, K + 1) [m] each receiver's range bias at each knot of ``edges`` and its σ ((R, 1): a constant; 0 where
+        not fitted).
     anchored : int
         The anchored pings fitted.
     speed_scale, speed_scale_sigma : float
         [1] the sound speed fitted over the one given, and its σ (1 and 0 where not fitted).
+    edges : numpy.ndarray or None
+        (K + 1,) [s] the biases' knots (linear in time between them); None: each bias a constant.
     """
 
     shift: np.ndarray
@@ -109,6 +114,15 @@ class Refinement:
     anchored: int = 0
     speed_scale: float = 1.0
     speed_scale_sigma: float = 0.0
+    edges: np.ndarray | None = None
+
+    def bias_at(self, times: np.ndarray | None, rows: int) -> np.ndarray:
+        """(rows, R) [m] each receiver's range bias at ``times`` (rows,) [s] on the edges' base (interpolated
+        between the knots, the end knots' beyond them; ``times`` unused where the biases are constants)."""
+        if self.edges is None:
+            return np.broadcast_to(self.bias[:, 0], (rows, len(self.bias)))
+        times = np.asarray(times, float)
+        return np.stack([np.interp(times, self.edges, knots) for knots in self.bias], axis=1)
 
 
 def checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma):
@@ -139,14 +153,15 @@ def checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma):
 
 def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: float | np.ndarray,
                      sigma_toa: float | np.ndarray, survey_sigma: float, dof: float = ROBUST_DOF,
-                     biases: bool = False, anchored: tuple[np.ndarray, np.ndarray] | None = None,
-                     speed_sigma: float | None = None) -> Refinement:
+                     biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
+                     speed_sigma: float | None = None, times: np.ndarray | None = None,
+                     edges: np.ndarray | None = None) -> Refinement:
     """The receivers' horizontal shifts and the tag's places fitted together (the module docstring).
 
     Each ping starts from its fix at the surveyed positions (:func:`~sblsim.models.tracking.fix.fix_pings`, from
     its place in ``places`` or the fix's own start, whichever fits better); a ping whose fix fits
     :data:`START_GATE` times worse than the record's median (a fix in a mirror place, a ping of echoes) is left out;
-    each step of the shifts is at most :data:`MAX_STEP` survey σ.
+    each step of the shifts and biases is at most :data:`MAX_STEP` survey σ.
 
     Parameters
     ----------
@@ -167,19 +182,25 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         ν of the arrivals' Student-t weights.
     biases : bool
         Fit each receiver's range bias [m] too (``toa_ij = t_j + (‖p_j − (r_i + d_i)‖ + β_i) / c_j``, its prior
-        ``N(0, survey_sigma²)``): a constant offset of its clock, as a synchronisation made on wrong positions
-        leaves it (the sync tags' ranges were as wrong).
-    anchored : (numpy.ndarray, numpy.ndarray), optional
+        ``N(0, survey_sigma²)`` at each knot): the offset a synchronisation made on wrong positions leaves its clock
+        (the sync tags' ranges were as wrong), a constant, or with ``edges`` linear in time between knots at them.
+    anchored : tuple of numpy.ndarray, optional
         Pings emitted at a receiver (sync tags at their receivers): their times of arrival (Q, R) [s] on the same
-        clock and each one's receiver (Q,) (its row of ``receivers``); their places move with that receiver (each
-        emission time an unknown of its own; an arrival at its own receiver left out), at the median sound speed.
-        With ``biases`` they tell a receiver's clock from its place: both directions of a pair of receivers are
-        heard.
+        clock, each one's receiver (Q,) (its row of ``receivers``) and, with ``edges``, each one's time (Q,) [s];
+        their places move with that receiver (each emission time an unknown of its own; an arrival at its own
+        receiver left out), at the median sound speed. With ``biases`` they tell a receiver's clock from its place:
+        both directions of a pair of receivers are heard.
     speed_sigma : float, optional
         [1] fit the sound speed too, as a scale of the one given (``c / m``, a prior σ of ``speed_sigma`` on
         ``m``): a sound speed calibrated from the pings on the surveyed positions took up their error in part. The
         array's scale then trades with it (no time of arrival tells them apart): it is a gauge like the array's
         translation and rotation, the survey's. None: as given.
+    times : numpy.ndarray, optional
+        (P,) [s] each ping's time on the ``edges``' base (needed with ``edges``).
+    edges : numpy.ndarray, optional
+        (K + 1,) [s] increasing: with ``biases``, the knots of each receiver's range bias (a synchronisation's bins'
+        edges: its clocks are linear between them, and so is the error wrong positions leave in them). None: one
+        constant bias per receiver.
 
     Returns
     -------
@@ -188,11 +209,19 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     Raises
     ------
     ModelError
-        Shapes that do not agree; a sound speed or survey σ not positive; no ping heard by
-        :data:`MIN_ARRIVALS` receivers.
+        Shapes that do not agree; a sound speed or survey σ not positive; edges not increasing, or without the
+        pings' or the anchored pings' times; no ping heard by :data:`MIN_ARRIVALS` receivers.
     """
     toa, receivers, places, c, sigma = checked_inputs(toa, receivers, places, c, sigma_toa, survey_sigma)
     dim = receivers.shape[1]
+    n = len(receivers)
+    layout = Unknowns.of(n, biases, edges, speed_sigma is not None)
+    times = None if times is None else np.asarray(times, float)
+    if layout.knots > 1 and (times is None or times.shape != (len(toa),)):
+        layout.bins(times, len(toa))  # refused in one line
+    anchor = None if anchored is None else Anchored.of(anchored, receivers, float(np.median(c)))
+    if anchor is not None:
+        layout.bins(anchor.times, len(anchor.toa))  # their times checked before the work
     heard = np.isfinite(toa)
     rows = np.flatnonzero((heard.sum(axis=1) >= MIN_ARRIVALS) & (np.isfinite(places[:, 2]) if dim == 3 else True))
     fixed, emitted, ratio = best_fixes(toa[rows], receivers, places[rows], c[rows], sigma)
@@ -203,202 +232,53 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     if not len(rows):
         raise ModelError(f"receiver positions: no ping heard by {MIN_ARRIVALS} receivers or more with a fix; "
                          "allowed: a moving tag heard by four receivers at once")
-    toa, heard, c = toa[rows], heard[rows], c[rows]
-    xy, t = fixed[:, :2].copy(), emitted.copy()
-    z = places[rows, 2] if dim == 3 else None
-    n = len(receivers)
-    anchor = None if anchored is None else _Anchored.of(anchored, receivers, float(np.median(c)))
-    d = np.zeros((n, 3 if biases else 2))  # each receiver's shift [m] (and range bias [m])
-    free = speed_sigma is not None
-    m = 1.0  # the slowness's scale: the sound speed c / m
-    prior = np.r_[np.full(d.size, survey_sigma**-2.0), [speed_sigma**-2.0] if free else []]
+    pings = {"receivers": receivers, "toa": toa[rows], "heard": heard[rows], "xy": fixed[:, :2].copy(),
+             "t": emitted.copy(), "z": places[rows, 2] if dim == 3 else None, "c": c[rows]}
+    pings["k"], pings["f"] = layout.bins(None if times is None else times[rows], len(rows))
+    theta = np.zeros(layout.size)  # the biases' knots [m], the shifts [m], the slowness's scale less 1 [1]
+    prior = np.r_[np.full(layout.size - int(layout.free), survey_sigma**-2.0),
+                  [speed_sigma**-2.0] if layout.free else []]
+    moving = slice(0, layout.size - int(layout.free))  # the biases and the shifts: a step's size
     converged, iterations = False, 0
     while iterations < ITERATIONS:
         iterations += 1
-        normal, rhs, ping_steps = _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof)
+        normal = Normal(layout.size)
+        ping_steps = ping_terms(normal, layout, theta, pings, sigma, dof, MIN_ARRIVALS)
         if anchor is not None:
-            more, extra = anchor.terms(receivers, d, m, free, sigma, dof)
-            normal, rhs = normal + more, rhs + extra
-        normal[np.diag_indices_from(normal)] += prior
-        rhs -= prior * np.r_[d.ravel(), [m - 1.0] if free else []]
-        step = np.linalg.solve(normal, rhs)
-        step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[:d.size]).max()), 1e-300))
+            anchor.terms(normal, layout, receivers, theta, sigma, dof)
+        step = solve(normal.matrix(prior), normal.rhs - prior * theta, layout)[0]
+        step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[moving]).max()), 1e-300))
         # the pings' steps given the receivers' (back-substitution: Δθ_j = A_j⁻¹ (b_j − B_j Δφ))
         px, pt = ping_steps(step)
-        xy += px
-        t += pt
+        pings["xy"] += px
+        pings["t"] += pt
         if anchor is not None:
             anchor.advance(step)
-        d += step[:d.size].reshape(d.shape)
-        m += float(step[-1]) if free else 0.0
-        if np.abs(step[:d.size]).max() < STEP_TOLERANCE:
+        theta += step
+        if np.abs(step[moving]).max() < STEP_TOLERANCE:
             converged = True
             break
-    normal, _, _ = _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof, covariance=True)
+    normal = Normal(layout.size)
+    ping_terms(normal, layout, theta, pings, sigma, dof, MIN_ARRIVALS, covariance=True)
     if anchor is not None:
-        normal = normal + anchor.terms(receivers, d, m, free, sigma, dof, covariance=True)[0]
-    normal[np.diag_indices_from(normal)] += prior
-    whole = np.linalg.inv(normal)
-    k = d.shape[1]
-    shifts = np.ravel(np.c_[k * np.arange(n), k * np.arange(n) + 1])  # the shifts' rows, x then y per receiver
-    covariance = whole[np.ix_(shifts, shifts)]
-    arrivals = heard.sum(axis=0)
-    ratio = shape_sigma_ratio(receivers[:, :2], covariance, survey_sigma, arrivals > 0, scale=free)
+        anchor.terms(normal, layout, receivers, theta, sigma, dof, covariance=True)
+    _, border, variance = solve(normal.matrix(prior), normal.rhs, layout, covariance=True)
+    covariance = border[:2 * n, :2 * n]
+    arrivals = pings["heard"].sum(axis=0)
+    ratio = shape_sigma_ratio(receivers[:, :2], covariance, survey_sigma, arrivals > 0, scale=layout.free)
     determined = ratio < MAX_SIGMA_RATIO
-    bias = d[:, 2].copy() if biases else np.zeros(n)
-    bias_sigma = np.sqrt(np.maximum(np.diag(whole)[2:k * n:3], 0.0)) if biases else np.zeros(n)
-    return Refinement(np.where(determined[:, None], d[:, :2], 0.0), d[:, :2].copy(), covariance, ratio, determined,
+    shift = layout.shifts(theta).copy()
+    if layout.knots:
+        bias = theta[:layout.band].reshape(layout.knots, n).T.copy()
+        bias_sigma = np.sqrt(np.maximum(variance, 0.0)).reshape(layout.knots, n).T.copy()
+    else:
+        bias = bias_sigma = np.zeros((n, 1))
+    m = layout.scale(theta)
+    return Refinement(np.where(determined[:, None], shift, 0.0), shift, covariance, ratio, determined,
                       arrivals, len(rows), iterations, converged, bias, bias_sigma,
                       0 if anchor is None else int(len(anchor.t)), 1.0 / m,
-                      float(np.sqrt(max(whole[-1, -1], 0.0))) / m**2 if free else 0.0)
-
-
-def _weights(e: np.ndarray, sigma: np.ndarray, dof: float, covariance: bool) -> np.ndarray:
-    """Each arrival's Student-t weight over σ² [1/s²] (``(ν + 1) / (ν + z²)``), or its observed information's with
-    ``covariance`` (0 past √ν σ: the robust smoother's covariance)."""
-    zed = e / sigma
-    if covariance:
-        return observed_information(zed, dof) / sigma**2
-    return (dof + 1.0) / (dof + zed**2) / sigma**2
-
-
-class _Anchored:
-    """Pings emitted where a receiver is (a sync tag at its receiver): each one's place is that receiver's, shifted
-    with it; its emission time its only unknown of its own. Each arrival at another receiver i of ping j from the
-    receiver k: ``toa = t_j + (‖(r_k + d_k) − (r_i + d_i)‖ + β_i) / c``."""
-
-    def __init__(self, toa: np.ndarray, source: np.ndarray, c: float, t: np.ndarray):
-        self.toa, self.source, self.c, self.t = toa, source, c, t
-        self.emission, self.receiver = np.nonzero(np.isfinite(toa))  # each arrival's emission and receiver
-        self._steps = None
-
-    @classmethod
-    def of(cls, anchored, receivers: np.ndarray, c: float) -> "_Anchored":
-        toa, source = np.asarray(anchored[0], float), np.asarray(anchored[1], int)
-        if toa.ndim != 2 or toa.shape[1] != len(receivers) or source.shape != (len(toa),) \
-                or not ((source >= 0) & (source < len(receivers))).all():
-            raise ModelError(f"receiver positions: anchored pings {toa.shape} from {source.shape} receivers; allowed: "
-                             f"(Q, {len(receivers)}) and (Q,) receiver indices")
-        toa = toa.copy()
-        toa[np.arange(len(toa)), source] = np.nan  # a receiver's own tag: no distance to learn from
-        keep = np.isfinite(toa).sum(axis=1) >= 2
-        toa, source = toa[keep], source[keep]
-        rho = np.linalg.norm(receivers[source][:, None, :] - receivers[None], axis=2)
-        t = np.nanmedian(toa - rho / c, axis=1)
-        return cls(toa, source, c, t)
-
-    def terms(self, receivers: np.ndarray, d: np.ndarray, m: float, free: bool, sigma: np.ndarray, dof: float,
-              covariance: bool = False):
-        """Their reduced normal matrix and right-hand side in the receivers' unknowns (and the slowness's scale,
-        last, where ``free``), each emission time eliminated; the emission times' steps kept for :meth:`advance`."""
-        n, k = d.shape
-        q, i = self.emission, self.receiver
-        src = self.source[q]
-        where = np.array(receivers, float)
-        where[:, :2] += d[:, :2]
-        diff = where[src] - where[i]
-        rho = np.linalg.norm(diff, axis=1)
-        u = m * diff[:, :2] / np.maximum(rho, 1e-9)[:, None] / self.c  # ∂τ/∂(place), (a, 2)
-        if k == 3:
-            rho = rho + d[i, 2]
-        travel = rho / self.c
-        e = self.toa[q, i] - self.t[q] - m * travel
-        w = _weights(e, sigma[i], dof, covariance)
-        J = np.zeros((len(q), n * k + int(free)))  # ∂τ/∂(receivers' unknowns[, m])
-        rows = np.arange(len(q))
-        J[rows, k * i], J[rows, k * i + 1] = -u[:, 0], -u[:, 1]
-        J[rows, k * src] += u[:, 0]
-        J[rows, k * src + 1] += u[:, 1]
-        if k == 3:
-            J[rows, k * i + 2] = m / self.c
-        if free:
-            J[:, -1] = travel
-        a = np.bincount(q, w, minlength=len(self.toa))  # each emission time's information
-        b = np.bincount(q, w * e, minlength=len(self.toa))
-        Bt = np.zeros((len(self.toa), J.shape[1]))
-        np.add.at(Bt, q, w[:, None] * J)
-        inv = np.where(a > 0, 1.0 / np.maximum(a, 1e-300), 0.0)
-        normal = (J * w[:, None]).T @ J - (Bt * inv[:, None]).T @ Bt
-        rhs = J.T @ (w * e) - Bt.T @ (inv * b)
-        self._steps = (inv, b, Bt)
-        return normal, rhs
-
-    def advance(self, step: np.ndarray) -> None:
-        """The emission times moved with the receivers' step: ``Δt_j = (b_j − B_j Δφ) / a_j``."""
-        inv, b, Bt = self._steps
-        self.t = self.t + inv * (b - Bt @ step)
-
-
-def _step(toa, heard, receivers, d, m, free, xy, t, z, c, sigma, dof, covariance: bool = False):
-    """One Gauss-Newton step's reduced system in the receivers' unknowns ``d`` (R, k: the shift, and the range bias
-    where k is 3) and, where ``free``, the slowness's scale ``m`` last: ``(kR [+ 1], kR [+ 1])`` and its right-hand
-    side, and the pings' steps as a function of that step (each ping's unknowns eliminated, chunk by chunk).
-    ``covariance``: the weights of the observed information."""
-    n, k = d.shape
-    normal = np.zeros((n, k, n, k))
-    rhs = np.zeros((n, k))
-    cross = np.zeros((n, k))  # the receivers' unknowns against the slowness's scale
-    scale_normal = scale_rhs = 0.0
-    pieces = []
-    for lo in range(0, len(toa), CHUNK):
-        rows = slice(lo, lo + CHUNK)
-        here = heard[rows]
-        at = receivers[None, :, :2] + d[None, :, :2]  # (1, R, 2)
-        delta = xy[rows, None, :] - at  # (p, R, 2)
-        vertical = 0.0 if z is None else (z[rows, None] - receivers[None, :, 2]) ** 2
-        rho = np.sqrt((delta**2).sum(axis=2) + vertical)
-        cc = c[rows, None]
-        u = m * delta / np.maximum(rho, 1e-9)[..., None] / cc[..., None]  # ∂τ/∂p, (p, R, 2) [s/m]
-        if k == 3:  # the receiver's range bias: a constant offset of its clock, in metres
-            rho = rho + d[None, :, 2]
-        travel = rho / cc  # ∂τ/∂m, (p, R) [s]
-        e = np.where(here, toa[rows] - t[rows, None] - m * travel, 0.0)
-        w = np.where(here, _weights(e, sigma[None], dof, covariance), 0.0)  # (p, R) [1/s²]
-        w[(w > 0).sum(axis=1) < MIN_ARRIVALS] = 0.0  # a ping the observed information leaves too few: nothing
-        g = np.concatenate([u, np.ones(u.shape[:2] + (1,))], axis=2)  # ∂τ/∂(x, y, t), (p, R, 3)
-        h = -u if k == 2 else np.concatenate([-u, np.broadcast_to(m / cc, u.shape[:2])[..., None]], axis=2)
-        A = np.einsum("pr,pra,prb->pab", w, g, g)
-        diagonal_a = A[:, np.arange(3), np.arange(3)]
-        # a relative ridge (Levenberg's) keeps a ping of bad geometry invertible; an empty ping's block the identity
-        A[:, np.arange(3), np.arange(3)] = np.where(diagonal_a > 0, diagonal_a * (1.0 + 1e-10), 1.0)
-        Ainv = np.linalg.inv(A)
-        b = np.einsum("pr,pra,pr->pa", w, g, e)
-        wg = w[..., None] * g
-        # C: Σ_j w h hᵀ on the diagonal blocks; minus Σ_j B_jᵀ A_j⁻¹ B_j over every pair of receivers
-        diagonal = np.einsum("pr,pra,prb->rab", w, h, h)
-        q = np.einsum("pia,pab,pkb->pik", wg, Ainv, wg)
-        normal -= np.einsum("pik,pia,pkb->iakb", q, h, h)
-        normal[np.arange(n), :, np.arange(n), :] += diagonal
-        Ab = np.einsum("pab,pb->pa", Ainv, b)
-        rhs += np.einsum("pr,pra,pr->ra", w, h, e) - np.einsum("pra,pa,prb->rb", wg, Ab, h)
-        Bm = None
-        if free:  # the slowness's scale: one more unknown, every arrival's
-            Bm = np.einsum("pra,pr->pa", wg, travel)  # B_j's column of m, (p, 3)
-            AB = np.einsum("pab,pb->pa", Ainv, Bm)
-            cross += np.einsum("pr,pra,pr->ra", w, h, travel) - np.einsum("pra,pa,prb->rb", wg, AB, h)
-            scale_normal += float(np.sum(w * travel**2) - np.einsum("pa,pa->", Bm, AB))
-            scale_rhs += float(np.sum(w * travel * e) - np.einsum("pa,pa->", AB, b))
-        pieces.append((Ainv, Ab, wg, h, Bm))
-
-    def ping_steps(step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        out = []
-        for Ainv, Ab, wg, h, Bm in pieces:
-            Bd = np.einsum("pra,prb,rb->pa", wg, h, step[:n * k].reshape(n, k))
-            if Bm is not None:
-                Bd = Bd + Bm * step[-1]
-            out.append(Ab - np.einsum("pab,pb->pa", Ainv, Bd))
-        whole = np.concatenate(out) if out else np.zeros((0, 3))
-        return whole[:, :2], whole[:, 2]
-
-    size = k * n + int(free)
-    full = np.zeros((size, size))
-    full[:k * n, :k * n] = normal.reshape(k * n, k * n)
-    vector = np.zeros(size)
-    vector[:k * n] = rhs.ravel()
-    if free:
-        full[:k * n, -1] = full[-1, :k * n] = cross.ravel()
-        full[-1, -1], vector[-1] = scale_normal, scale_rhs
-    return full, vector, ping_steps
+                      float(np.sqrt(max(border[-1, -1], 0.0))) / m**2 if layout.free else 0.0,
+                      layout.edges if layout.knots > 1 else None)
 
 
 def best_fixes(toa, receivers, places, c, sigma):
@@ -441,5 +321,5 @@ def best_fixes(toa, receivers, places, c, sigma):
     return out
 
 
-__all__ = ["CHUNK", "DEPTH_SIGMA", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS", "Refinement", "START_GATE",
+__all__ = ["DEPTH_SIGMA", "ITERATIONS", "MAX_STEP", "MIN_ARRIVALS", "Refinement", "START_GATE",
            "STEP_TOLERANCE", "best_fixes", "checked_inputs", "refine_receivers"]

@@ -80,9 +80,10 @@ class StudyRefinement:
 def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str], names: list[str]):
     """The moving tags' pings pooled over the study's receivers: times of arrival (P, R) [s] (each tag's on its own
     origin: every ping has its own emission time), each ping's place on its track (P, dim) [m] (NaN where the
-    track has none), its sound speed (P,) [m/s], each receiver's timing noise (R,) [s] and the tags used."""
+    track has none), its sound speed (P,) [m/s], each receiver's timing noise (R,) [s], the tags used and each
+    ping's time (P,) [s since 1970 UTC] (its first arrival's)."""
     column = {n: k for k, n in enumerate(names)}
-    parts, places, speeds, used = [], [], [], []
+    parts, places, speeds, used, times = [], [], [], [], []
     sigma = np.full(len(names), np.nan)
     for folder in folders:
         matrix, outcome = matrices[folder], outcomes[folder]
@@ -100,19 +101,20 @@ def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str
             len(matrix.names), float(np.median(np.atleast_1d(outcome.summary["sigma_toa_s"]))))
         sigma[at] = np.where(np.isfinite(sigma[at]), sigma[at], noise)
         parts.append(toa)
+        times.append(np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin)
         places.append(place)
         speeds.append(np.full(len(toa), float(outcome.summary["sound_speed"]["sound_speed_m_s"])))
         used.append(matrix.summary["tag"])
     sigma = np.where(np.isfinite(sigma), sigma, np.nanmedian(sigma) if np.isfinite(sigma).any() else 1.5e-4)
-    return np.vstack(parts), np.vstack(places), np.concatenate(speeds), sigma, used
+    return np.vstack(parts), np.vstack(places), np.concatenate(speeds), sigma, used, np.concatenate(times)
 
 
 def sync_pings(residuals: pd.DataFrame | None, hydrophones: pd.DataFrame, names: list[str]
-               ) -> tuple[np.ndarray, np.ndarray] | None:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The sync tags' emissions as the synchronisation heard them (its ``residuals``: ``receiver``, ``tag``,
     ``emission``, ``time_sync`` on the reference clock, ``kept``), each from the receiver its tag sits at
-    (``hydrophones``' ``sync_tag``): times of arrival (Q, R) [s] over ``names`` (on the earliest's origin) and each
-    one's receiver (Q,); None where there are none."""
+    (``hydrophones``' ``sync_tag``): times of arrival (Q, R) [s] over ``names`` (on the earliest's origin), each
+    one's receiver (Q,) and its time (Q,) [s since 1970 UTC] (its first arrival's); None where there are none."""
     if residuals is None or not len(residuals):
         return None
     home = {str(t): str(r) for r, t in zip(hydrophones["receiver"], hydrophones["sync_tag"], strict=True) if t}
@@ -128,12 +130,13 @@ def sync_pings(residuals: pd.DataFrame | None, hydrophones: pd.DataFrame, names:
     toa[at, rows["receiver"].astype(str).map(column).to_numpy(int)] = times - times.min()
     source = np.zeros(len(emission), int)
     source[at] = rows["tag"].astype(str).map(home).map(column).to_numpy(int)
-    return toa, source
+    return toa, source, np.nanmin(toa, axis=1) + times.min()
 
 
 def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: list[str], deployments,
                  survey_sigma: float, held: dict[str, Any] | None = None,
-                 anchored: tuple[np.ndarray, np.ndarray] | None = None) -> StudyRefinement:
+                 anchored: tuple[np.ndarray, ...] | None = None, edges: np.ndarray | None = None
+                 ) -> StudyRefinement:
     """The receivers' positions refined from the moving tags' tracks (the module docstring).
 
     Parameters
@@ -151,9 +154,13 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     held : dict, optional
         An earlier round's held-out check (its ``summary["held_out"]``), taken instead of checking again (a round on
         the clocks synchronised on refined positions: :func:`~sblsim.orchestrator.telemetry.study.run_study`).
-    anchored : (numpy.ndarray, numpy.ndarray), optional
+    anchored : tuple of numpy.ndarray, optional
         The sync tags' emissions as :func:`sync_pings` gives them: fitted with the moving tags' pings, each
         receiver's clock offset with its position (both directions of a pair of receivers heard).
+    edges : numpy.ndarray, optional
+        (K + 1,) [s since 1970 UTC] the synchronisation's bins' edges: each receiver's clock offset fitted at each
+        (linear between them, as the synchronisation's clocks are: the error wrong positions leave in them changes
+        from bin to bin with the sync tags a receiver hears); None: one constant offset per receiver.
 
     Returns
     -------
@@ -172,17 +179,18 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     names = [str(n) for n in table["receiver"]]
     axes = ["x", "y", "z"][:matrices[moving[0]].positions.shape[1]]
     receivers = table[axes].to_numpy(float)
-    toa, places, c, sigma, tags = _pings(outcomes, matrices, moving, names)
+    toa, places, c, sigma, tags, times = _pings(outcomes, matrices, moving, names)
     biases = anchored is not None  # the clocks' offsets the synchronisation left, told apart by its sync tags
     # a sound speed calibrated from the pings on the surveyed positions took up their error: fitted with them
     calibrated = all(str(outcomes[f].summary["sound_speed"]["source"]).startswith(("calibrated", "fallback"))
                      for f in moving)
     speed = SPEED_SIGMA if calibrated else None
+    edges = edges if biases else None
     fit = refine_receivers(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
-                           speed_sigma=speed)
+                           speed_sigma=speed, times=times, edges=edges)
     if held is None:
         check = held_out(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
-                         speed_sigma=speed)
+                         speed_sigma=speed, times=times, edges=edges)
         held = {"survey_chi2_per_dof": check.surveyed, "refined_chi2_per_dof": check.refined, "pings": check.pings,
                 "folds": check.folds.tolist(), "helps": check.helps,
                 "rule": f"the refined array's median chi2 per degree of freedom of the pings left out at most "
@@ -206,6 +214,7 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     moved = positions[positions["refined"]]
     summary = {"sync_emissions": fit.anchored,
                "clock_offsets_fitted": biases,
+               "clock_offset_knots": int(fit.bias.shape[1]) if biases else 0,
                "sound_speed": ({"fitted": True, "scale": fit.speed_scale, "scale_sigma": fit.speed_scale_sigma,
                                 "why": "the tags' sound speeds were calibrated from their pings on the surveyed "
                                        "positions; the array's scale is then the survey's (a gauge)"}
@@ -283,9 +292,13 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
     def anchored(study):
         return None if study.sync is None else sync_pings(study.sync.residuals, assigned.hydrophones, names)
 
+    def edges(study):  # the synchronisation's bins' edges [s since 1970 UTC]: its clocks' knots
+        fit = None if study.sync is None else study.sync.fit
+        return None if fit is None or len(fit.edges) < 2 else np.asarray(fit.edges, float) + study.sync.origin
+
     try:
         refinement = refine_study(outcome.outcomes, outcome.matrices, _moving(outcome), deployments, survey_sigma,
-                                  anchored=anchored(outcome))
+                                  anchored=anchored(outcome), edges=edges(outcome))
     except ModelError as exc:  # said in a warning (lines)
         outcome.summary["positions"] = {"kept": False, "reason": str(exc)}
         return outcome
@@ -306,7 +319,7 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
             break
         try:
             following = refine_study(second.outcomes, second.matrices, _moving(second), deployments, survey_sigma,
-                                     refinement.summary["held_out"], anchored(second))
+                                     refinement.summary["held_out"], anchored(second), edges(second))
         except ModelError:
             break
         change = float(np.hypot(*(following.positions[["x", "y"]].to_numpy()

@@ -30,9 +30,10 @@ def test_the_sync_tags_emissions_are_their_arrivals_from_their_receiver():
         "time_sync": [100.0, 100.2, 100.3, 200.0, 200.1, 300.0, 100.5],
         "kept": [True, True, False, True, True, True, True]})
     hydrophones = pd.DataFrame({"receiver": ["A", "B", "C"], "sync_tag": ["S1", "S2", ""]})
-    toa, source = sync_pings(residuals, hydrophones, ["A", "B", "C"])
+    toa, source, times = sync_pings(residuals, hydrophones, ["A", "B", "C"])
     expected = np.array([[0.0, 0.2, np.nan], [100.0, np.nan, 100.1]])
     assert np.allclose(toa, expected, equal_nan=True) and source.tolist() == [0, 1]
+    assert times.tolist() == [100.0, 200.0]  # each emission's first kept arrival
     assert sync_pings(residuals.iloc[:0], hydrophones, ["A", "B", "C"]) is None
 
 
