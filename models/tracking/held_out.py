@@ -57,7 +57,7 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
              sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS, dof: float = ROBUST_DOF,
              biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
              speed_sigma: float | None = None, times: np.ndarray | None = None,
-             edges: np.ndarray | None = None) -> HeldOut:
+             edges: np.ndarray | None = None, rescale: bool = False) -> HeldOut:
     """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
     the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
     anchored pings in every refinement, the refined array's times less its biases at the pings' ``times``); the
@@ -81,7 +81,7 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
         keep = np.ones(len(toa), bool)
         keep[block] = False
         refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
-                                   anchored, speed_sigma, None if times is None else times[keep], edges)
+                                   anchored, speed_sigma, None if times is None else times[keep], edges, rescale)
         moved = receivers.copy()
         moved[:, :2] += refined.shift
         # the refined array's times less its receivers' range biases (where determined, as its shifts), at its speed

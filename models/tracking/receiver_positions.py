@@ -60,6 +60,9 @@ ITERATIONS, STEP_TOLERANCE = 50, 1e-3
 #: A ping whose fix at the surveyed positions fits this many times worse than the median ping's (χ² per degree of
 #: freedom) is left out of the refinement: a fix in a mirror place or of echoes, no start for Gauss-Newton.
 START_GATE = 25.0
+#: The arrivals a receiver needs for its timing noise to be its own residuals' (``rescale``), and the least timing
+#: noise [s] so found (a microsecond: below any receiver's resolution).
+MIN_RESCALE, MIN_SIGMA = 20, 1e-6
 #: The σ [m] a place's depth is kept at in a 3-D fix (the depth is the tag's, not refitted).
 DEPTH_SIGMA = 0.01
 #: The most one Gauss-Newton step moves a receiver [survey σ]: a step the arrivals' weights are not yet right for
@@ -98,6 +101,8 @@ class Refinement:
         [1] the sound speed fitted over the one given, and its σ (1 and 0 where not fitted).
     edges : numpy.ndarray or None
         (K + 1,) [s] the biases' knots (linear in time between them); None: each bias a constant.
+    sigma : numpy.ndarray or None
+        (R,) [s] the timing noise each receiver's arrivals were weighed by (with ``rescale``, its own residuals').
     """
 
     shift: np.ndarray
@@ -115,6 +120,7 @@ class Refinement:
     speed_scale: float = 1.0
     speed_scale_sigma: float = 0.0
     edges: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
     def bias_at(self, times: np.ndarray | None, rows: int) -> np.ndarray:
         """(rows, R) [m] each receiver's range bias at ``times`` (rows,) [s] on the edges' base (interpolated
@@ -155,7 +161,7 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
                      sigma_toa: float | np.ndarray, survey_sigma: float, dof: float = ROBUST_DOF,
                      biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
                      speed_sigma: float | None = None, times: np.ndarray | None = None,
-                     edges: np.ndarray | None = None) -> Refinement:
+                     edges: np.ndarray | None = None, rescale: bool = False) -> Refinement:
     """The receivers' horizontal shifts and the tag's places fitted together (the module docstring).
 
     Each ping starts from its fix at the surveyed positions (:func:`~sblsim.models.tracking.fix.fix_pings`, from
@@ -201,6 +207,10 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         (K + 1,) [s] increasing: with ``biases``, the knots of each receiver's range bias (a synchronisation's bins'
         edges: its clocks are linear between them, and so is the error wrong positions leave in them). None: one
         constant bias per receiver.
+    rescale : bool
+        Once converged, take each receiver's timing noise from its own residuals (:func:`_rescaled`) and fit again:
+        a timing noise taken from a synchronisation made on wrong positions took up their error (each receiver's
+        as its clock's), and would weigh the receivers the refinement is to move as if they were noisy.
 
     Returns
     -------
@@ -239,25 +249,30 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     prior = np.r_[np.full(layout.size - int(layout.free), survey_sigma**-2.0),
                   [speed_sigma**-2.0] if layout.free else []]
     moving = slice(0, layout.size - int(layout.free))  # the biases and the shifts: a step's size
-    converged, iterations = False, 0
-    while iterations < ITERATIONS:
-        iterations += 1
-        normal = Normal(layout.size)
-        ping_steps = ping_terms(normal, layout, theta, pings, sigma, dof, MIN_ARRIVALS)
-        if anchor is not None:
-            anchor.terms(normal, layout, receivers, theta, sigma, dof)
-        step = solve(normal.matrix(prior), normal.rhs - prior * theta, layout)[0]
-        step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[moving]).max()), 1e-300))
-        # the pings' steps given the receivers' (back-substitution: Δθ_j = A_j⁻¹ (b_j − B_j Δφ))
-        px, pt = ping_steps(step)
-        pings["xy"] += px
-        pings["t"] += pt
-        if anchor is not None:
-            anchor.advance(step)
-        theta += step
-        if np.abs(step[moving]).max() < STEP_TOLERANCE:
-            converged = True
-            break
+    converged, iterations, limit = False, 0, ITERATIONS
+    for stage in range(2 if rescale else 1):
+        if stage:  # each receiver's timing noise from its own residuals, then the fit again from where it stands
+            sigma = _rescaled(sigma, ping_terms(Normal(layout.size), layout, theta, pings, sigma, dof,
+                                                MIN_ARRIVALS)[1]())
+            converged, limit = False, iterations + ITERATIONS
+        while iterations < limit:
+            iterations += 1
+            normal = Normal(layout.size)
+            ping_steps = ping_terms(normal, layout, theta, pings, sigma, dof, MIN_ARRIVALS)[0]
+            if anchor is not None:
+                anchor.terms(normal, layout, receivers, theta, sigma, dof)
+            step = solve(normal.matrix(prior), normal.rhs - prior * theta, layout)[0]
+            step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[moving]).max()), 1e-300))
+            # the pings' steps given the receivers' (back-substitution: Δθ_j = A_j⁻¹ (b_j − B_j Δφ))
+            px, pt = ping_steps(step)
+            pings["xy"] += px
+            pings["t"] += pt
+            if anchor is not None:
+                anchor.advance(step)
+            theta += step
+            if np.abs(step[moving]).max() < STEP_TOLERANCE:
+                converged = True
+                break
     normal = Normal(layout.size)
     ping_terms(normal, layout, theta, pings, sigma, dof, MIN_ARRIVALS, covariance=True)
     if anchor is not None:
@@ -278,7 +293,18 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
                       arrivals, len(rows), iterations, converged, bias, bias_sigma,
                       0 if anchor is None else int(len(anchor.t)), 1.0 / m,
                       float(np.sqrt(max(border[-1, -1], 0.0))) / m**2 if layout.free else 0.0,
-                      layout.edges if layout.knots > 1 else None)
+                      layout.edges if layout.knots > 1 else None, sigma)
+
+
+def _rescaled(sigma: np.ndarray, residuals: np.ndarray) -> np.ndarray:
+    """Each receiver's timing noise [s]: its arrivals' studentised ``residuals`` (P, R) [s] (NaN where not heard)
+    median absolute value over a normal's (×1.4826: robust to the late arrivals of echoes; Rousseeuw & Croux, JASA
+    88(424), 1993); a receiver with fewer than :data:`MIN_RESCALE` arrivals keeps its own."""
+    heard = np.isfinite(residuals)
+    n = heard.sum(axis=0)
+    spread = np.array([1.4826 * np.median(np.abs(residuals[heard[:, r], r])) if n[r] >= MIN_RESCALE else np.nan
+                       for r in range(len(n))])
+    return np.where(n >= MIN_RESCALE, np.maximum(np.nan_to_num(spread), MIN_SIGMA), sigma)
 
 
 def best_fixes(toa, receivers, places, c, sigma):

@@ -187,10 +187,10 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     speed = SPEED_SIGMA if calibrated else None
     edges = edges if biases else None
     fit = refine_receivers(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
-                           speed_sigma=speed, times=times, edges=edges)
+                           speed_sigma=speed, times=times, edges=edges, rescale=True)
     if held is None:
         check = held_out(toa, receivers, places, c, sigma, survey_sigma, biases=biases, anchored=anchored,
-                         speed_sigma=speed, times=times, edges=edges)
+                         speed_sigma=speed, times=times, edges=edges, rescale=True)
         held = {"survey_chi2_per_dof": check.surveyed, "refined_chi2_per_dof": check.refined, "pings": check.pings,
                 "folds": check.folds.tolist(), "helps": check.helps,
                 "rule": f"the refined array's median chi2 per degree of freedom of the pings left out at most "
