@@ -1,9 +1,10 @@
 """A study's receivers' positions refined from its own pings (``sblsim track --refine-positions``): the moving tags'
 pings pooled with the sync tags' emissions (:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`): the
-tags' places, each receiver's horizontal shift and the constant offset its clock keeps from a synchronisation made on
-wrong positions (the sync tags' emissions, both directions of each pair of receivers, tell a clock from a place), and
-the sound speed where the tags' was calibrated from their pings (it took up the positions' error), the surveyed
-positions the prior (``--survey-sigma``).
+tags' places, each receiver's horizontal shift and the offset its clock keeps from a synchronisation made on wrong
+positions at each of its bins' edges (the sync tags' emissions, both directions of each pair of receivers, tell a
+clock from a place), and the sound speed where the tags' was calibrated from their pings (it took up the positions'
+error), the surveyed positions the prior (``--survey-sigma``), each receiver's timing noise its own residuals' (the
+synchronisation's took up the positions' error).
 
 Taken only where the data say it helps: the moving tags' pings of each block of the record left out in turn fit the
 array refined without them better than the surveyed one (:func:`~sblsim.models.tracking.held_out.held_out`),
@@ -215,6 +216,7 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
     summary = {"sync_emissions": fit.anchored,
                "clock_offsets_fitted": biases,
                "clock_offset_knots": int(fit.bias.shape[1]) if biases else 0,
+               "timing_noise": "each receiver's from its own residuals in the fit (median absolute, studentised)",
                "sound_speed": ({"fitted": True, "scale": fit.speed_scale, "scale_sigma": fit.speed_scale_sigma,
                                 "why": "the tags' sound speeds were calibrated from their pings on the surveyed "
                                        "positions; the array's scale is then the survey's (a gauge)"}

@@ -207,3 +207,35 @@ def test_with_a_measured_sound_speed_the_arrays_scale_is_found_too(simulated, tm
                            tags=folder / "in" / "tags.csv", refine_positions=True, out=tmp_path / "refined", **given)
     assert _rms(sim, refined) <= 1.1 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))
     assert not refined.summary["positions"]["sound_speed"]["fitted"]
+
+
+@pytest.mark.slow
+def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
+    """Sixteen receivers, three with a sync tag, 1-5 m off (seed 4): synchronised on the surveyed positions each
+    receiver's clock error changes from bin to bin with the sync tags it hears. Refined with the offsets at the bins'
+    edges, the tracks come within 2.5 x the true positions' RMS (2.05 x when written; 4.9 x with one constant offset
+    per clock, the refinement before), and the study says the knots it fitted."""
+    sim = simulate_study(n_receivers=16, n_tags=2, days=0.25, redeployed=0, seed=4)
+    keep = {sim.deployments["transmitter"][k] for k in np.random.default_rng(104).choice(16, size=3, replace=False)}
+    dropped = [t for t in sim.deployments["transmitter"] if t not in keep]
+    sim.deployments = sim.deployments.assign(transmitter=[t if t in keep else ""
+                                                          for t in sim.deployments["transmitter"]])
+    sim.detections = sim.detections[~sim.detections["transmitter"].isin(dropped)].reset_index(drop=True)
+    files = sim.write(tmp_path / "in", "vue")
+    sheet = pd.read_csv(files["deployments"])
+    x, y = sim.frame.from_latlon(sheet["deploy_lat"].to_numpy(), sheet["deploy_long"].to_numpy())
+    true = np.c_[x, y]
+    rng = np.random.default_rng(1004)
+    direction = rng.normal(size=true.shape)
+    errors = rng.uniform(1.0, 5.0, len(true))[:, None] * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    errors = gauge_free(errors, true, scale=True)
+    lat, lon = sim.frame.to_latlon(true[:, 0] + errors[:, 0], true[:, 1] + errors[:, 1])
+    (tmp_path / "off").mkdir()
+    sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(tmp_path / "off" / "deployments.csv", index=False)
+    right = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=2,
+                         out=tmp_path / "right")
+    refined = sblsim.track(files["detections"], receivers=tmp_path / "off" / "deployments.csv", tags=files["tags"],
+                           workers=2, refine_positions=True, out=tmp_path / "refined")
+    summary = refined.summary["positions"]
+    assert summary["kept"] and summary["clock_offset_knots"] == 7, summary
+    assert _rms(sim, refined) <= 2.5 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))
