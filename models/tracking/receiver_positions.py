@@ -17,7 +17,9 @@ are: with few sync tags the error changes from bin to bin with the sync tags a r
 emitted where a receiver is (a sync tag at its receiver: its place moves with that receiver, its emission time its
 only unknown of its own), which tell a receiver's clock from its place (both directions of each pair of receivers
 are heard); and the **sound speed's scale** ``m`` (``c_j / m``, a prior on ``m``), where the sound speed was
-calibrated from the same pings on the surveyed positions and took up their error.
+calibrated from the same pings on the surveyed positions and took up their error. Where asked (``rescale``), each
+receiver's timing noise is then taken from its own studentised residuals and the fit made again: a noise taken from a
+synchronisation made on wrong positions took up their error.
 
 A ping heard by three receivers (two coordinates and a time) adds nothing: only pings with at least four arrivals
 are fitted. What the pings determine is the array's **shape**: a translation or a rotation of the whole array with

@@ -114,6 +114,24 @@ def test_the_survey_sigma_is_refused_in_one_line(tmp_path, capsys, extra, messag
 # --------------------------------------------------------------------------- a simulated study, positions off
 
 
+def _written_off(sim, folder, seed: int):
+    """``sim``'s files written into ``folder``/in, and its deployments 1-5 m off (each receiver in a random direction
+    drawn from ``seed``; the errors' translation, rotation and scale taken out: what no time of arrival sees where
+    the sound speed is calibrated, the survey's) into ``folder``/off: the files, the true positions and the errors."""
+    files = sim.write(folder / "in", "vue")
+    sheet = pd.read_csv(files["deployments"])
+    x, y = sim.frame.from_latlon(sheet["deploy_lat"].to_numpy(), sheet["deploy_long"].to_numpy())
+    true = np.c_[x, y]
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=true.shape)
+    errors = rng.uniform(1.0, 5.0, len(true))[:, None] * direction / np.linalg.norm(direction, axis=1, keepdims=True)
+    errors = gauge_free(errors, true, scale=True)
+    lat, lon = sim.frame.to_latlon(true[:, 0] + errors[:, 0], true[:, 1] + errors[:, 1])
+    (folder / "off").mkdir()
+    sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(folder / "off" / "deployments.csv", index=False)
+    return files, true, errors
+
+
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     """A simulated study (9 receivers each with its sync tag, 3 animals, 6 hours), its deployments as surveyed right
@@ -121,18 +139,7 @@ def simulated(tmp_path_factory):
     no time of arrival sees where the sound speed is calibrated, the survey's), and the study on each."""
     folder = tmp_path_factory.mktemp("positions")
     sim = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=0, seed=4)
-    files = sim.write(folder / "in", "vue")
-    sheet = pd.read_csv(files["deployments"])
-    x, y = sim.frame.from_latlon(sheet["deploy_lat"].to_numpy(), sheet["deploy_long"].to_numpy())
-    true = np.c_[x, y]
-    rng = np.random.default_rng(104)
-    direction = rng.normal(size=true.shape)
-    errors = rng.uniform(1.0, 5.0, len(true))[:, None] * direction / np.linalg.norm(direction, axis=1,
-                                                                                      keepdims=True)
-    errors = gauge_free(errors, true, scale=True)
-    lat, lon = sim.frame.to_latlon(true[:, 0] + errors[:, 0], true[:, 1] + errors[:, 1])
-    (folder / "off").mkdir()
-    sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(folder / "off" / "deployments.csv", index=False)
+    files, true, errors = _written_off(sim, folder, 104)
     runs = {}
     for name, receivers, refine in (("right", files["deployments"], False), ("off", folder / "off" /
                                                                              "deployments.csv", False),
@@ -221,17 +228,7 @@ def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
     sim.deployments = sim.deployments.assign(transmitter=[t if t in keep else ""
                                                           for t in sim.deployments["transmitter"]])
     sim.detections = sim.detections[~sim.detections["transmitter"].isin(dropped)].reset_index(drop=True)
-    files = sim.write(tmp_path / "in", "vue")
-    sheet = pd.read_csv(files["deployments"])
-    x, y = sim.frame.from_latlon(sheet["deploy_lat"].to_numpy(), sheet["deploy_long"].to_numpy())
-    true = np.c_[x, y]
-    rng = np.random.default_rng(1004)
-    direction = rng.normal(size=true.shape)
-    errors = rng.uniform(1.0, 5.0, len(true))[:, None] * direction / np.linalg.norm(direction, axis=1, keepdims=True)
-    errors = gauge_free(errors, true, scale=True)
-    lat, lon = sim.frame.to_latlon(true[:, 0] + errors[:, 0], true[:, 1] + errors[:, 1])
-    (tmp_path / "off").mkdir()
-    sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(tmp_path / "off" / "deployments.csv", index=False)
+    files, _, _ = _written_off(sim, tmp_path, 1004)
     right = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=2,
                          out=tmp_path / "right")
     refined = sblsim.track(files["detections"], receivers=tmp_path / "off" / "deployments.csv", tags=files["tags"],
