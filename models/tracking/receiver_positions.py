@@ -210,7 +210,8 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         edges: its clocks are linear between them, and so is the error wrong positions leave in them). None: one
         constant bias per receiver.
     rescale : bool
-        Once converged, take each receiver's timing noise from its own residuals (:func:`_rescaled`) and fit again:
+        Once converged, take each receiver's timing noise from its own studentised residuals (their median absolute
+        value over a normal's, a receiver with :data:`MIN_RESCALE` arrivals or more) and fit again:
         a timing noise taken from a synchronisation made on wrong positions took up their error (each receiver's
         as its clock's), and would weigh the receivers the refinement is to move as if they were noisy.
 
