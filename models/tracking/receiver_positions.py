@@ -256,7 +256,7 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     for stage in range(2 if rescale else 1):
         if stage:  # each receiver's timing noise from its own residuals, then the fit again from where it stands
             sigma = _rescaled(sigma, ping_terms(Normal(layout.size), layout, theta, pings, sigma, dof,
-                                                MIN_ARRIVALS)[1]())
+                                                MIN_ARRIVALS, studentised=True)[1])
             converged, limit = False, iterations + ITERATIONS
         while iterations < limit:
             iterations += 1

@@ -164,12 +164,12 @@ def weights(e: np.ndarray, sigma: np.ndarray, dof: float, covariance: bool) -> n
 
 
 def ping_terms(normal: Normal, layout: Unknowns, theta: np.ndarray, pings, sigma: np.ndarray, dof: float,
-               min_arrivals: int, covariance: bool = False):
+               min_arrivals: int, covariance: bool = False, studentised: bool = False):
     """A Gauss-Newton step's terms of the pings added to ``normal``, each ping's place and emission time eliminated
     (pings grouped by bin: a group's pings touch the same unknowns), and the pings' steps as a function of the
-    receivers' (back-substitution: ``Δθ_j = A_j⁻¹ (b_j − B_j Δφ)``), and a function of the arrivals' residuals
-    (P, R) [s] at the step's start, each over ``√(1 − h)`` (``h`` its leverage in its ping's fix: studentised; NaN
-    where not heard).
+    receivers' (back-substitution: ``Δθ_j = A_j⁻¹ (b_j − B_j Δφ)``), and with ``studentised`` a function of the
+    arrivals' residuals (P, R) [s] at the step's start, each over ``√(1 − h)`` (``h`` its leverage in its ping's
+    fix; NaN where not heard), else None.
 
     ``pings`` holds ``toa`` (P, R) [s], ``heard`` (P, R), ``xy`` (P, 2) [m], ``t`` (P,) [s], ``z`` (P,) [m] or
     None, ``c`` (P,) [m/s], ``k`` and ``f`` (P,) each ping's bin and fraction."""
@@ -226,26 +226,27 @@ def ping_terms(normal: Normal, layout: Unknowns, theta: np.ndarray, pings, sigma
                 block[-1, :-1] += cross
                 block[-1, -1] += float(np.sum(w * travel**2) - np.einsum("pa,pa->", Bm, AB))
                 vector[-1] += float(np.sum(w * travel * e) - np.einsum("pa,pa->", AB, b))
-            leverage = np.einsum("pra,pab,prb->pr", wg, Ainv, g)  # each arrival's share taken by its ping's unknowns
-            pieces.append((rows, Ainv, Ab, wg, h, Bm, at_columns, np.where(here, e, np.nan), leverage))
+            # each arrival's residual over the root of the share its ping's own unknowns leave it
+            shown = None if not studentised else np.where(here, e, np.nan) / np.sqrt(np.clip(
+                1.0 - np.einsum("pra,pab,prb->pr", wg, Ainv, g), 0.05, 1.0))
+            pieces.append((rows, Ainv, Ab, wg, h, Bm, at_columns, shown))
         where = np.r_[at_columns.ravel(), [layout.size - 1] if layout.free else []].astype(np.int64)
         normal.block(where, block, vector)
 
     def ping_steps(step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         out = np.zeros((len(toa), 3))
-        for rows, Ainv, Ab, wg, h, Bm, columns, _, _ in pieces:
+        for rows, Ainv, Ab, wg, h, Bm, columns, _ in pieces:
             Bd = np.einsum("pra,prb,rb->pa", wg, h, step[columns])
             if Bm is not None:
                 Bd = Bd + Bm * step[-1]
             out[rows] = Ab - np.einsum("pab,pb->pa", Ainv, Bd)
         return out[:, :2], out[:, 2]
 
-    def residuals() -> np.ndarray:
-        out = np.full(toa.shape, np.nan)
-        for piece in pieces:  # studentised: over the root of the share the ping's own unknowns leave
-            out[piece[0]] = piece[-2] / np.sqrt(np.clip(1.0 - piece[-1], 0.05, 1.0))
-        return out
-
+    residuals = None
+    if studentised:
+        residuals = np.full(toa.shape, np.nan)
+        for piece in pieces:
+            residuals[piece[0]] = piece[-1]
     return ping_steps, residuals
 
 
