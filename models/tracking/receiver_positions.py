@@ -232,9 +232,7 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
     times = None if times is None else np.asarray(times, float)
     if layout.knots > 1 and (times is None or times.shape != (len(toa),)):
         layout.bins(times, len(toa))  # refused in one line
-    anchor = None if anchored is None else Anchored.of(anchored, receivers, float(np.median(c)))
-    if anchor is not None:
-        layout.bins(anchor.times, len(anchor.toa))  # their times checked before the work
+    anchor = None if anchored is None else Anchored.of(anchored, receivers, float(np.median(c)), layout)
     heard = np.isfinite(toa)
     rows = np.flatnonzero((heard.sum(axis=1) >= MIN_ARRIVALS) & (np.isfinite(places[:, 2]) if dim == 3 else True))
     fixed, emitted, ratio = best_fixes(toa[rows], receivers, places[rows], c[rows], sigma)

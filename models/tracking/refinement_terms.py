@@ -255,15 +255,18 @@ class Anchored:
     with it; its emission time its only unknown of its own. Each arrival at another receiver i of ping j from the
     receiver k: ``toa = t_j + (‖(r_k + d_k) − (r_i + d_i)‖ + β_i(t)) / c``."""
 
-    def __init__(self, toa: np.ndarray, source: np.ndarray, c: float, t: np.ndarray, times: np.ndarray | None):
-        self.toa, self.source, self.c, self.t, self.times = toa, source, c, t, times
+    def __init__(self, toa: np.ndarray, source: np.ndarray, c: float, t: np.ndarray,
+                 bins: tuple[np.ndarray, np.ndarray]):
+        self.toa, self.source, self.c, self.t = toa, source, c, t
+        self.k, self.f = bins  # each emission's bin and fraction of it (Unknowns.bins)
         self.emission, self.receiver = np.nonzero(np.isfinite(toa))  # each arrival's emission and receiver
         self._steps = None
 
     @classmethod
-    def of(cls, anchored, receivers: np.ndarray, c: float) -> "Anchored":
+    def of(cls, anchored, receivers: np.ndarray, c: float, layout: Unknowns) -> "Anchored":
         """From ``(toa, source)`` or ``(toa, source, times)``: each emission's times of arrival (Q, R) [s],
-        receiver (Q,) and time (Q,) [s] (on the edges' base, where the biases have knots)."""
+        receiver (Q,) and time (Q,) [s] (on the edges' base, where the biases have knots: each emission's bin in
+        ``layout`` found once, its times refused in one line where they are missing)."""
         toa, source = np.asarray(anchored[0], float), np.asarray(anchored[1], int)
         times = np.asarray(anchored[2], float) if len(anchored) > 2 and anchored[2] is not None else None
         if toa.ndim != 2 or toa.shape[1] != len(receivers) or source.shape != (len(toa),) \
@@ -277,7 +280,7 @@ class Anchored:
         toa, source = toa[keep], source[keep]
         rho = np.linalg.norm(receivers[source][:, None, :] - receivers[None], axis=2)
         t = np.nanmedian(toa - rho / c, axis=1)
-        return cls(toa, source, c, t, None if times is None else times[keep])
+        return cls(toa, source, c, t, layout.bins(None if times is None else times[keep], len(toa)))
 
     def terms(self, normal: Normal, layout: Unknowns, receivers: np.ndarray, theta: np.ndarray, sigma: np.ndarray,
               dof: float, covariance: bool = False) -> None:
@@ -292,9 +295,8 @@ class Anchored:
         diff = where[src] - where[i]
         rho = np.linalg.norm(diff, axis=1)
         u = m * diff[:, :2] / np.maximum(rho, 1e-9)[:, None] / self.c  # ∂τ/∂(place), (a, 2)
-        k, f = layout.bins(self.times, len(self.toa))
-        k, f = k[q], f[q]
-        travel = (rho + layout.bias(theta, k, f)[np.arange(len(q)), i]) / self.c
+        k, f = self.k[q], self.f[q]
+        travel = (rho + layout.bias(theta, self.k, self.f)[q, i]) / self.c
         e = self.toa[q, i] - self.t[q] - m * travel
         w = weights(e, sigma[i], dof, covariance)
         # ∂τ/∂(the receivers' unknowns[, m]): the shifts of the receiver and of the source, the receiver's biases
