@@ -179,9 +179,11 @@ def ping_terms(normal: Normal, layout: Unknowns, theta: np.ndarray, pings, sigma
     at = receivers[None, :, :2] + d[None]  # (1, R, 2)
     bias = layout.bias(theta, pings["k"], pings["f"])
     pieces = []
-    groups = np.unique(pings["k"])
-    for group in groups:
-        members = np.flatnonzero(pings["k"] == group) if len(groups) > 1 else np.arange(len(toa))
+    order = np.argsort(pings["k"], kind="stable")  # the pings by bin, each bin's in their order
+    groups, starts = np.unique(pings["k"][order], return_index=True)
+    bounds = np.r_[starts, len(order)]
+    for g, group in enumerate(groups):
+        members = order[bounds[g]:bounds[g + 1]]
         at_columns, width = layout.columns(int(group))
         size = n * width + int(layout.free)
         block, vector = np.zeros((size, size)), np.zeros(size)
