@@ -63,26 +63,30 @@ def time_quantum(times: np.ndarray) -> float:
     return 0.0
 
 
-def resolution_warning(times: np.ndarray, travel_time: float, sound_speed: float, what: str) -> str | None:
+def resolution_warning(times: np.ndarray | None, travel_time: float, sound_speed: float, what: str,
+                       quantum: float | None = None) -> str | None:
     """One line where the times' rounding (:func:`time_quantum`) is not well below the travel time across the array.
 
     Parameters
     ----------
-    times : ndarray, (n,)
-        Detection times [s].
+    times : ndarray, (n,) or None
+        Detection times [s] (None: ``quantum`` given).
     travel_time : float
         The largest travel time between two receivers [s] (0 for one receiver: any rounding said).
     sound_speed : float
         [m/s], to state the rounding's error in metres.
     what : str
         The source named in the line (a file).
+    quantum : float, optional
+        [s] the times' rounding where known already (the finest of batches' :func:`time_quantum`: each of
+        :data:`QUANTA` a whole multiple of the next).
 
     Returns
     -------
     str or None
         The line, or None where the rounding's standard deviation is below a tenth of ``travel_time``.
     """
-    q = time_quantum(times)
+    q = time_quantum(times) if quantum is None else float(quantum)
     if q == 0.0:
         return None
     sigma = rounding_sigma(q)

@@ -30,11 +30,34 @@ class Assigned:
     detections: Detections
     hydrophones: pd.DataFrame
     set_aside: dict[str, Any]
-    mask: np.ndarray
+    mask: np.ndarray | None
+    #: The kept detections' first and last times [s] where ``detections`` holds some of them only (a store's study:
+    #: its sync tags' rows, :mod:`sblsim.orchestrator.telemetry.study_detections`); None: ``detections``' own.
+    span: tuple[float, float] | None = None
+
+    def kept_span(self) -> tuple[float, float]:
+        """[s] the first and last kept detection's time (:attr:`span`, else the detections' own)."""
+        if self.span is not None:
+            return self.span
+        times = self.detections.frame["time"].to_numpy(float)
+        return float(times.min()), float(times.max())
 
 
-def assign(detections: Detections, deployments: Deployments) -> Assigned:
+def assign(detections: Detections, deployments: Deployments, detected: Any = None,
+           refuse_empty: bool = True) -> Assigned:
     """Each detection at the deployment that logged it (the module docstring), the others set aside and counted.
+
+    Parameters
+    ----------
+    detections : Detections
+        The detections as read (``receiver`` the serial logged).
+    deployments : Deployments
+    detected : sequence of str, optional
+        Every tag the study detected, where ``detections`` are some of its tags' only (a store read a batch of tags
+        at a time): the deployments' sync tags are matched against them, as against the whole file's; default
+        ``detections``' own.
+    refuse_empty : bool
+        Refuse detections none of which is kept (else an empty assignment: a batch of a store's tags).
 
     Raises
     ------
@@ -60,7 +83,7 @@ def assign(detections: Detections, deployments: Deployments) -> Assigned:
     renamed = frame.assign(serial=serial, receiver=np.where(where >= 0, names[np.clip(where, 0, None)], serial))
     # each sync tag as the detections name it, and per deployment where it was deployed more than once
     tags = renamed["tag"].to_numpy(dtype=object).copy()
-    detected = frame["tag"].unique()
+    detected = frame["tag"].unique() if detected is None else np.asarray(detected, dtype=object)
     of_tag = pd.Series(tags).groupby(tags, sort=False).indices
     stray = np.zeros(len(frame), bool)
     carried = table[table["sync_tag"] != ""].sort_values(["sync_tag", "start"], kind="stable")
@@ -82,7 +105,7 @@ def assign(detections: Detections, deployments: Deployments) -> Assigned:
         tags[mine[inside]] = labels[at][k[inside]]
     keep = (where >= 0) & ~stray
     kept = renamed.assign(tag=tags)[keep].reset_index(drop=True)
-    if not len(kept):
+    if not len(kept) and refuse_empty:
         raise ModelError(f"detections: none of {detections.source!r} is inside a deployment of {deployments.source!r} "
                          f"(serials detected: {', '.join(sorted(map(str, set(serial)))[:8])}; in the table: "
                          f"{', '.join(sorted(map(str, table['serial'].unique()))[:8])}); allowed: detections at the "

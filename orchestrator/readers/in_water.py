@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pandas as pd
 
 from sblsim.orchestrator.readers.assign import Assigned
 from sblsim.orchestrator.readers.deployments import Deployments
@@ -91,13 +92,23 @@ def in_water(detections: Detections, assigned: Assigned, deployments: Deployment
     ModelError
         No deployment used (none of the detections kept; :func:`assign` refuses that first).
     """
-    table = deployments.table
     kept = assigned.detections.frame
-    count = table["receiver"].map(kept["receiver"].value_counts()).fillna(0).astype(np.int64).to_numpy()
-    used = count > 0
     times = kept["time"].to_numpy(float)
-    first, last = (float(times.min()), float(times.max())) if len(times) else (np.inf, -np.inf)
-    logged = table["serial"].isin(detections.frame["receiver"].unique()).to_numpy()
+    span = (float(times.min()), float(times.max())) if len(times) else (np.inf, -np.inf)
+    return counted_in_water(kept["receiver"].value_counts(), span, detections.frame["receiver"].unique(), assigned,
+                            deployments)
+
+
+def counted_in_water(kept: pd.Series, span: tuple[float, float], serials, assigned: Assigned,
+                     deployments: Deployments) -> InWater:
+    """:func:`in_water` from what it takes of the detections: the kept detections per deployment (``kept``, by the
+    deployment's name), their first and last times [s] (``span``) and the serials logged, as a study of a store
+    counts them a batch of tags at a time (:mod:`sblsim.orchestrator.telemetry.study_detections`)."""
+    table = deployments.table
+    count = table["receiver"].map(kept).fillna(0).astype(np.int64).to_numpy()
+    used = count > 0
+    first, last = span
+    logged = table["serial"].isin(list(serials)).to_numpy()
     overlaps = ((table["start"].to_numpy(float) <= last) & (table["end"].to_numpy(float) >= first))
     cause = np.select([used, ~logged, ~overlaps], ["", NOT_USED[0], NOT_USED[1]], NOT_USED[2]).astype(object)
     array = deployments.restricted(used, {"used": used, "not_used": cause, "detections": count})
@@ -107,4 +118,4 @@ def in_water(detections: Detections, assigned: Assigned, deployments: Deployment
     return InWater(array, replace(assigned, hydrophones=hydrophones))
 
 
-__all__ = ["InWater", "NOT_USED", "SAID", "in_water"]
+__all__ = ["InWater", "NOT_USED", "SAID", "counted_in_water", "in_water"]

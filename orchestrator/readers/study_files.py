@@ -12,7 +12,8 @@ The detections may be given as
   files are named in a note, not read;
 * **one or more files**;
 * **a store** (a folder ``sblsim store`` wrote: :mod:`sblsim.orchestrator.store`), read as its file would be but
-  without the file's row and size limits (the detections still held in memory).
+  without the file's row and size limits (a study, :mod:`sblsim.orchestrator.telemetry.study_detections`, reads it
+  a batch of tags at a time: ``read_study(..., detections=False)``).
 
 Each detection file is read by :func:`~sblsim.orchestrator.readers.detections.read_detections` in its own format
 (``format``, else told from its first line): one receiver's log, or many receivers' in one file. Many files are one
@@ -195,7 +196,8 @@ def _header(path: Path, what: str) -> list[str]:
 
 
 def read_study(files: StudyFiles, format: str | None = None, crs: str | None = None, frame: str | None = None,
-               tz: str | None = None) -> tuple[Deployments, Detections, TagSheet | None, list[str]]:
+               tz: str | None = None, detections: bool = True
+               ) -> tuple[Deployments, Detections | None, TagSheet | None, list[str]]:
     """A study's files read, each by its reader (module docstring).
 
     Parameters
@@ -207,12 +209,14 @@ def read_study(files: StudyFiles, format: str | None = None, crs: str | None = N
         The receivers' CRS and the metric frame.
     tz : str, optional
         The study's IANA time zone (actel's local times).
+    detections : bool
+        Read the detections (else None: a store's, read by the study a batch of tags at a time).
 
     Returns
     -------
     deployments, detections, sheet, notes
-        The receivers, the detections (:func:`read_many`), the tag sheet (None where none is given) and the notes
-        on what was read.
+        The receivers, the detections (:func:`read_many`; None where not read), the tag sheet (None where none is
+        given) and the notes on what was read.
 
     Raises
     ------
@@ -231,7 +235,7 @@ def read_study(files: StudyFiles, format: str | None = None, crs: str | None = N
                          "one; allowed: actel's deployments, or no stations file")
     else:
         deployments = read_deployments(files.receivers, crs, frame)
-    data = read_many(files.detections, format)
+    data = read_many(files.detections, format) if detections else None
     sheet = None
     if files.tags is not None:
         header = _header(files.tags, "tags")

@@ -129,10 +129,10 @@ class Store:
     def _filter(self, tags, receivers, start, end):
         """The Arrow expression selecting ``tags``, ``receivers`` and [start, end) (None: all)."""
         parts = []
-        if tags is not None:
-            parts.append(pc.field("tag").isin([str(t) for t in tags]))
+        if tags is not None:  # typed: an empty list is no type Arrow can match a column's with
+            parts.append(pc.field("tag").isin(pa.array([str(t) for t in tags], pa.string())))
         if receivers is not None:
-            parts.append(pc.field("receiver").isin([str(r) for r in receivers]))
+            parts.append(pc.field("receiver").isin(pa.array([str(r) for r in receivers], pa.string())))
         if start is not None:
             parts.append(pc.field("time") >= float(start))
         if end is not None:

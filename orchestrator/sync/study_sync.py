@@ -26,14 +26,17 @@ from sblsim.orchestrator.store.read import is_store, read_any
 from sblsim.orchestrator.sync.run import SyncOutcome, synchronise
 
 
-def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None) -> str | None:
+def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None,
+                     quantum: float | None = None) -> str | None:
     """One line where the detections' times are rounded too coarsely for the array
     (:func:`sblsim.models.sync.resolution.resolution_warning`; ``hydrophones``' ``x``, ``y``, ``z`` [m] give the
-    largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None."""
+    largest travel time at ``sound_speed`` [m/s], 1,480 m/s where not known), else None; ``quantum`` [s] their
+    rounding where found already (a store's study: its batches'), else the detections' times'."""
     speed = sound_speed or NOMINAL_SOUND_SPEED
     xyz = np.nan_to_num(hydrophones[["x", "y", "z"]].to_numpy(float))  # a depth not given: the horizontal alone
-    return resolution_warning(detections.frame["time"].to_numpy(float), largest_travel_time(xyz, speed), speed,
-                              f"detections {detections.source!r}")
+    times = None if quantum is not None else detections.frame["time"].to_numpy(float)
+    return resolution_warning(times, largest_travel_time(xyz, speed), speed, f"detections {detections.source!r}",
+                              quantum)
 
 
 def synchronise_study(detections: Detections, deployments, sound_speed: float | None = None,

@@ -46,23 +46,23 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
-from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import Detections
-from sblsim.orchestrator.readers.in_water import in_water
+from sblsim.orchestrator.readers.in_water import counted_in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.readers.study_files import read_study, study_files
 from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, spec_for
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.readers.water import read_temperature_series
+from sblsim.orchestrator.store.read import is_store
 from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
 from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
-from sblsim.orchestrator.telemetry.report.daily import daily_counts
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
+from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
@@ -128,18 +128,25 @@ class StudyOutcome:
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
 #: never one of the study's own files).
 TAGS_FOLDER = "tags"
-def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, detections: Detections,
+def _chosen(names: Sequence[str] | None, sheet: TagSheet | None, tally: Tally,
             sync_tags: set[str]) -> list[tuple[str, TagSpec]]:
     """The tags to track (module docstring, step 3): each as named, with its spec."""
     if names:
         return [(n, spec_for(sheet, n)) for n in names]
     if sheet is not None:
         return [(t.transmitter, t) for t in sheet.of_role("animal", "reference")]
-    frame = detections.frame
-    counts = frame["tag"].value_counts()
-    labelled = set(frame.loc[frame["species"].str.lower() == "sync", "tag"]) if "species" in frame else set()
+    counts, labelled = tally.tags, tally.labelled
     base = {t.rsplit(".", 1)[0] for t in sync_tags}  # a sync tag named per deployment (SYNC.k)
     return [(t, TagSpec(t)) for t in counts.index if t not in sync_tags and t not in base and t not in labelled]
+
+
+def _key(name: str, detected) -> str | ModelError | None:
+    """The detected tag ``name`` stands for (:func:`~sblsim.orchestrator.readers.transmitters.match`), None where
+    none, the refusal where two code spaces share it."""
+    try:
+        return match(name, detected)
+    except ModelError as exc:
+        return exc
 
 
 def _found(name: str, detected, ambiguous: str | None = None) -> str | None:
@@ -243,31 +250,36 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         (one line). A tag that cannot be tracked is a row of ``tags.csv``.
     """
     begun = clock.perf_counter()
-    deployments, data, sheet, notes = read_study(study_files(detections, receivers, spatial, tags), format, crs, frame,
-                                                 tz)
+    files = study_files(detections, receivers, spatial, tags)
+    stored = len(files.detections) == 1 and is_store(files.detections[0])  # read a batch of tags at a time
+    deployments, data, sheet, notes = read_study(files, format, crs, frame, tz, detections=not stored)
+    source = StudyDetections.stored(files.detections[0], format) if stored else StudyDetections(data)
+    data = source.data
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     if temperature_path is not None:  # refused here in one line, not once per tag
         read_temperature_series(temperature_path, 0.0, absolute=True)
-    assigned = assign(data, deployments)
-    array = in_water(data, assigned, deployments)  # the deployments that logged the study: the array from here on
+    assigned, tally = source.assigned(deployments)
+    sheet_deployments = deployments  # each tag's rows of a store assigned as the sync tags' were
+    # the deployments that logged the study: the array from here on
+    array = counted_in_water(tally.kept, tally.span, tally.serials, assigned, deployments)
     deployments, assigned = array.deployments, array.assigned
     if array.line():
         notes.append(array.line())
     bottom, water_info = _water(deployments, water_depth, notes)
-    detected = assigned.detections.frame["tag"].unique()
+    detected = tally.tags.index.to_numpy(dtype=object)
     sync_tags = set(assigned.hydrophones["sync_tag"]) - {""}
     if sheet is not None:
         sync_tags |= {k for t in sheet.of_role("sync") if (k := _found(t.transmitter, detected)) is not None}
-    asked = _chosen(chosen, sheet, assigned.detections, sync_tags)
+    asked = _chosen(chosen, sheet, tally, sync_tags)
     if not asked:
         raise ModelError("tags: no tag to track (the tag sheet lists no animal or reference tag, and every detected "
                          "tag is a sync tag); allowed: a sheet with animal or reference tags, or --tag")
     if all(_found(n, detected, ambiguous=n) is None for n, _ in asked):  # said before the clocks are fitted
-        counts = assigned.detections.frame["tag"].value_counts()
+        counts = tally.tags
         raise ModelError(f"tag: none of the tags asked for ({', '.join(n for n, _ in asked[:8])}) is detected inside "
                          f"a deployment in {data.source!r}; allowed: a detected tag, e.g. "
                          + ", ".join(f"{t} ({c} detections)" for t, c in counts.head(6).items()))
-    rounded = rounding_warning(assigned.detections, assigned.hydrophones, sound_speed)
+    rounded = rounding_warning(assigned.detections, assigned.hydrophones, sound_speed, tally.quantum)
     if rounded:
         notes.append(rounded)
 
@@ -280,22 +292,31 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                                                series, bin_hours, notes, scored)
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
-        groups = assigned.detections.frame.groupby("tag", sort=False).groups
         rows: dict[str, dict[str, Any]] = {}
         jobs, matrices, folders = [], {}, {}
         logged = clocks_info["source"].startswith("as logged")
-        for name, spec in asked:
+        keys = [_key(name, detected) for name, _ in asked]
+        first: dict[str, int] = {}  # each tag's folder, by the first name asking for it
+        for i, key in enumerate(keys):
+            if isinstance(key, str):
+                first.setdefault(f"{TAGS_FOLDER}/{folder_name(key, 'tag')}", i)  # never one of the study's own names
+        built: dict[int, tuple] = {}  # each tag's folder, matrix, job, notes and water, in the order read
+        for i, stored_rows in source.frames([k if isinstance(k, str) else None for k in keys], tally, sheet_deployments,
+                                            assigned):
+            name, spec = asked[i]
+            key = keys[i]
             row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
                    "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
                    **unpositioned(0)}
             try:
-                key = match(name, detected)
+                if isinstance(key, ModelError):
+                    raise key
                 if key is None:
                     raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
-                folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"  # never one of the study's own names
-                if folder in folders.values():
+                folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"
+                if first[folder] != i:
                     raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
-                mine = _tag_detections(assigned.detections.frame.loc[groups[key]], spec)
+                mine = _tag_detections(stored_rows, spec)
                 counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
                 row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
                         "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
@@ -310,13 +331,11 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                         "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
                 matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
                                                   spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
-                if matrix.summary.get("interval_warning"):
-                    notes.append(f"tag {key}: {matrix.summary['interval_warning']}")
+                said = [f"tag {key}: {matrix.summary['interval_warning']}"] if matrix.summary.get(
+                    "interval_warning") else []
                 heard = np.isfinite(matrix.toa).sum(axis=1)
                 row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
-                _write_matrix(matrix, workdir / folder, notes)
-                matrices[folder] = matrix
-                folders[name] = folder
+                _write_matrix(matrix, workdir / folder, said)
                 options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
                            "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
@@ -326,15 +345,23 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))
-                    water_info["per_tag_m"][key] = options["water_depth"]
-                jobs.append((folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv", options))
+                built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
+                                             options), said)
                 row["folder"] = folder
             except ModelError as exc:
                 code = code_of(str(exc))
                 row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
                                                                                  code)
             rows[name] = row
-        summary = _summary(data, deployments, assigned, clocks_info, sheet, notes)
+        for i in sorted(built):  # in the order asked, whatever the order read
+            folder, matrix, job, said = built.pop(i)
+            notes.extend(said)
+            matrices[folder] = matrix
+            folders[asked[i][0]] = folder
+            jobs.append(job)
+            if bottom is not None:
+                water_info["per_tag_m"][keys[i]] = job[3]["water_depth"]
+        summary = _summary(data, deployments, tally, clocks_info, sheet, notes)
         summary["toa_noise"] = noise_info
         if water_info:
             summary["water_depth"] = water_info
@@ -367,8 +394,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                        if k}}
         summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
-        return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced,
-                            daily_counts(assigned.detections.frame))
+        return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily)
 
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
@@ -444,16 +470,13 @@ def combined_tracks(outcomes: dict[str, Any], matrices: dict[str, Any]) -> pd.Da
     return tracks[columns].sort_values(["tag", "epoch_s"], kind="stable").reset_index(drop=True)
 
 
-def _summary(data: Detections, deployments: Deployments, assigned, clocks: dict[str, Any], sheet: TagSheet | None,
-             notes: list[str]) -> dict[str, Any]:
+def _summary(data: Detections, deployments: Deployments, tally: Tally, clocks: dict[str, Any],
+             sheet: TagSheet | None, notes: list[str]) -> dict[str, Any]:
     """``study.json`` before the tracking (the files, the frame, the detections used and set aside, the clocks)."""
-    times = assigned.detections.frame["time"].to_numpy(float)
-    aside = assigned.set_aside
-    return {"detections": {"file": data.source, "format": data.format, "rows": int(len(data.frame)),
-                           "used": int(len(assigned.detections.frame)),
-                           "set_aside": int(len(data.frame) - len(assigned.detections.frame)), "reasons": aside,
+    return {"detections": {"file": data.source, "format": data.format, "rows": tally.rows, "used": tally.used,
+                           "set_aside": tally.rows - tally.used, "reasons": tally.set_aside,
                            "ignored_columns": data.ignored_columns, "duplicates": data.duplicates,
-                           "first_utc": iso_utc([times.min()])[0], "last_utc": iso_utc([times.max()])[0]},
+                           "first_utc": iso_utc([tally.span[0]])[0], "last_utc": iso_utc([tally.span[1]])[0]},
             "receivers": deployments.summary(), "frame": deployments.summary()["frame"], "clocks": clocks,
             "tag_sheet": None if sheet is None else {"file": sheet.source, "transmitters": len(sheet.tags)},
             "times": "UTC: each row's time is its estimated emission on the reference receiver's clock, which "

@@ -63,7 +63,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
             if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
                 info["windows"] = s["windows"]
             return offsets_clocks(outcome.offsets), table, info, outcome
-    times = assigned.detections.frame["time"].to_numpy(float)
+    first, last = assigned.kept_span()
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
     notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
                  "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
@@ -71,7 +71,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
     source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone
               else "as logged (no sync tag)")
-    return logged_clocks(table["receiver"].tolist(), float(np.floor(times.min())), float(np.ceil(times.max()))), \
+    return logged_clocks(table["receiver"].tolist(), float(np.floor(first)), float(np.ceil(last))), \
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
 
 
