@@ -37,11 +37,13 @@ MAX_LABELS = 80
 
 
 def _heard(outcome: StudyOutcome) -> dict[str, list[str]]:
-    """Each tracked tag's receivers: the deployments whose column of its times-of-arrival matrix holds an arrival."""
+    """Each tracked tag's receivers: the deployments whose column of its times-of-arrival matrix holds an arrival
+    (a matrix written and let go of its rows, :attr:`StudyOutcome.written`: each of its columns, as the study keeps
+    only those: :func:`~.tag_rows.heard_columns`)."""
     out = {}
     for folder in outcome.outcomes:
         matrix = outcome.matrices[folder]
-        heard = np.isfinite(matrix.toa).any(axis=0)
+        heard = np.isfinite(matrix.toa).any(axis=0) if len(matrix.toa) else np.ones(len(matrix.names), bool)
         out[str(matrix.summary["tag"])] = [n for n, h in zip(matrix.names, heard) if h]
     return out
 
@@ -269,7 +271,8 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     import matplotlib.pyplot as plt
 
     for name, tag in outcome.outcomes.items():
-        write(tag, folder / name)
+        if name not in outcome.written:  # (the others written as they ended)
+            write(tag, folder / name)
     if outcome.sync is not None:
         write_sync(outcome.sync, folder / "sync")
     outcome.tracks.to_csv(folder / "tracks.csv", index=False)

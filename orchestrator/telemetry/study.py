@@ -3,8 +3,9 @@ detection exports and a tag sheet in; every tag tracked with its own ping type, 
 latitude, longitude and UTC.
 
 1. The deployments are read and projected (:mod:`.deployments`), the detections read in any export
-   (:func:`~sblsim.orchestrator.readers.detections.read_detections`) and each put at its deployment, those outside one
-   set aside and counted (:func:`~.deployments.assign`); the array is the deployments that logged a detection kept,
+   (:func:`~sblsim.orchestrator.readers.detections.read_detections`; a store's a batch of tags at a time, never all
+   at once: :mod:`.study_detections`) and each put at its deployment, those outside one set aside and counted
+   (:func:`~.deployments.assign`); the array is the deployments that logged a detection kept,
    in a frame chosen over them (:func:`~sblsim.orchestrator.readers.in_water.in_water`: a network's other
    deployments listed as not used, in one line); the tag sheet is read (:mod:`.tag_sheet`).
 2. The clocks: a synchronisation's folder given (``sync``: its ``offsets.csv``, its refined positions where it has
@@ -67,6 +68,7 @@ from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refine
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
+from sblsim.orchestrator.tracks.outputs import written_light
 from sblsim.orchestrator.tracks.resume import Resume
 from sblsim.orchestrator.tracks.tracker import toa_noise
 
@@ -112,6 +114,9 @@ class StudyOutcome:
     positions : pandas.DataFrame or None
         ``positions.csv``: the receivers' positions refined from the moving tags (with ``refine_positions``;
         :class:`~.study_positions.StudyRefinement`).
+    written : set of str
+        The tags' folders whose track files are written already (``write_tags``: their outcomes hold their track
+        alone, their matrices no rows).
     """
 
     tracks: pd.DataFrame
@@ -123,6 +128,7 @@ class StudyOutcome:
     sync: Any = None
     daily: Any = None
     positions: Any = None
+    written: set = field(default_factory=set)
 
 
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
@@ -175,7 +181,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
               ended: Callable[[dict[str, Any]], None] | None = None, temperature_path: Path | None = None,
               water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
               tz: str | None = None, refine_positions: bool = False,
-              survey_sigma: float | None = None, resume: Resume | None = None) -> StudyOutcome:
+              survey_sigma: float | None = None, resume: Resume | None = None,
+              write_tags: bool = False) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -238,6 +245,12 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     resume : Resume, optional
         The tags kept by an interrupted run of the same output (:mod:`~sblsim.orchestrator.tracks.resume`): a tag
         whose inputs are unchanged is taken from it, each tag that ends is kept (``summary["resumed"]``).
+    write_tags : bool
+        Write each tracked tag's files into its folder as it ends (a study written to a folder:
+        :func:`~sblsim.orchestrator.tracks.outputs.write`) and keep of it its track alone (``estimates``,
+        ``errors``, ``bound`` and ``set_aside`` None; its matrix without rows; a reference tag kept whole, for its
+        scoring), so that a season's tags are never in memory together; not with ``refine_positions`` (the
+        refinement reads every moving tag's whole outcome).
 
     Returns
     -------
@@ -336,6 +349,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 heard = np.isfinite(matrix.toa).sum(axis=1)
                 row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
                 _write_matrix(matrix, workdir / folder, said)
+                if light:  # written: its rows let go (a season's matrices are never in memory together)
+                    matrix = replace(matrix, toa=matrix.toa[:0], pings=matrix.pings.iloc[:0])
                 options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
                            "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
@@ -368,15 +383,19 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         if started is not None:
             started([j[0] for j in jobs], summary)
         by_folder = {folder: name for name, folder in folders.items()}
+        specs = dict(asked)
         tick = clock.perf_counter()
 
-        def done(folder: str, result) -> None:
+        def done(folder: str, result):
             name = by_folder[folder]
             if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the study's
                 result = result.replace(str(workdir) + os.sep, "")
             rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
             if ended is not None:
                 ended(rows[name])
+            if light and not isinstance(result, str) and specs[name].role != "reference":
+                return written_light(result, workdir / folder)  # its files now, its track alone kept
+            return None
 
         kept = 0 if resume is None else resume.kept
         results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
@@ -394,8 +413,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                        if k}}
         summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
-        return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily)
+        return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily,
+                            written={f for f in outcomes if outcomes[f].estimates is None})
 
+    light = write_tags and not refine_positions  # the refinement reads every moving tag's matrix and estimates
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
     stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)

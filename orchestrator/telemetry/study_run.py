@@ -46,7 +46,7 @@ def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None
         resume = Resume(target)  # the tags of an interrupted run of this output, each tag kept as it ends
         with staged_directory(target) as tmp:
             outcome = run_study(detections, receivers, tags, workdir=tmp, sync=sync, started=started, ended=ended,
-                                resume=resume, **options)
+                                resume=resume, write_tags=True, **options)
             if bar:
                 bar[0].close()
             write_study(outcome, tmp)

@@ -149,8 +149,9 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
     """Track each job ``(name, toa_path, receivers_path, options)`` (:func:`track_tag`, each with its own options) in
     worker processes (``workers``, default the CPU count; 1: one after another in this process) or on a Dask
     scheduler's workers (each sent its tag's files: :func:`track_sent`, no shared filesystem assumed); ``ended(name,
-    result)`` called as each ends. With ``resume``, a tag kept by an interrupted run of the same inputs is taken
-    from it (:mod:`.resume`) and each tag that ends is kept. Returns name → the
+    result)`` called as each ends (what it returns, where not None, kept in the result's place: a study that wrote
+    the tag's files keeps its track alone). With ``resume``, a tag kept by an interrupted run of the same inputs is
+    taken from it (:mod:`.resume`) and each tag that ends is kept. Returns name → the
     :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, or the one line of its refusal."""
     results: dict[str, Any] = {}
     keys: dict[str, tuple[str, Path]] = {}
@@ -158,9 +159,8 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
     def done(name: str, result) -> None:
         if resume is not None and name in keys:
             resume.save(keys[name][0], result, keys[name][1])
-        results[name] = result
-        if ended is not None:
-            ended(name, result)
+        kept = None if ended is None else ended(name, result)
+        results[name] = result if kept is None else kept
 
     if resume is not None:
         left = []

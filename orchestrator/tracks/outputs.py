@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -121,4 +122,12 @@ def write(outcome: TrackOutcome, out: Path) -> None:
         plt.close(fig)
 
 
-__all__ = ["figure", "scale_bar", "write"]
+def written_light(outcome: TrackOutcome, out: Path) -> TrackOutcome:
+    """``outcome``'s files written into ``out`` (:func:`write`), and what is kept of it in memory: its track, summary,
+    score, truth and array; its ``estimates``, ``errors``, ``bound`` and ``set_aside`` None (read from its files:
+    a study of a season keeps every tag's track, not every estimator's rows)."""
+    write(outcome, out)
+    return replace(outcome, estimates=None, errors=None, bound=None, set_aside=None)
+
+
+__all__ = ["figure", "scale_bar", "write", "written_light"]

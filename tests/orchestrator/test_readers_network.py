@@ -196,11 +196,12 @@ def test_one_serial_redeployed_over_years_each_detection_at_its_deployment(tmp_p
 
 def test_the_duplicates_dropped_are_said_in_the_studys_summary(tmp_path):
     from sblsim.orchestrator.telemetry.study import _summary
+    from sblsim.orchestrator.telemetry.study_detections import Tally
 
     rows = _rows(seed=5, n=20)
     d = _read(tmp_path, "joined.csv", _text(rows + rows[:4]))
     (tmp_path / "receivers.csv").write_text("serial,lat,lon\n" + "".join(
         f"{450100 + k},45.1{k},-83.2{k}\n" for k in range(4)))
     deployments = read_deployments(tmp_path / "receivers.csv")
-    summary = _summary(d, deployments, assign(d, deployments), {}, None, [])
+    summary = _summary(d, deployments, Tally.of(d, assign(d, deployments)), {}, None, [])
     assert summary["detections"]["duplicates"] == 4 and summary["detections"]["rows"] == len(rows)

@@ -20,6 +20,7 @@ import pandas as pd
 import pytest
 
 from sblsim.orchestrator.tracks import many, resume
+from sblsim.orchestrator.tracks.outputs import written_light
 from sblsim.orchestrator.tracks.resume import MARKER, Resume, job_key, resume_folder
 from tests.orchestrator.test_tracking_tags import _array
 
@@ -200,3 +201,20 @@ def test_a_study_killed_mid_way_and_run_again_writes_the_uninterrupted_tracks(tm
     for tag in tags:
         assert (tmp_path / "out" / "tags" / tag / "track.csv").read_bytes() == \
             (tmp_path / "whole" / "tags" / tag / "track.csv").read_bytes()
+
+
+def test_what_ended_returns_is_kept_and_a_written_outcome_keeps_its_track_alone(tracked, tmp_path, monkeypatch):
+    """A study written to a folder writes each tag's files as it ends and keeps its track alone
+    (:func:`~sblsim.orchestrator.tracks.outputs.written_light`): the files those of the whole outcome."""
+    folder, receivers, outcome = tracked
+    monkeypatch.setattr(many, "track_tag", lambda toa, rec, options: outcome)
+    jobs = [(f"tag{k}", folder / "tag0.txt", receivers, OPTIONS | {"seed": k}) for k in range(2)]
+    results = many.run_tracks(jobs, workers=1, ended=lambda name, result: written_light(result, tmp_path / name)
+                              if name == "tag0" else None)
+    light = results["tag0"]
+    assert results["tag1"] is outcome and outcome.estimates is not None  # None returned: the outcome kept whole
+    assert light.estimates is None and light.errors is None and light.bound is None and light.set_aside is None
+    assert light.track is outcome.track and light.summary is outcome.summary
+    for name in ("track", "estimates"):  # as the whole outcome's are written
+        assert (tmp_path / "tag0" / f"{name}.csv").read_text() == getattr(outcome, name).to_csv(index=False)
+    assert json.loads((tmp_path / "tag0" / "summary.json").read_text()) == outcome.summary

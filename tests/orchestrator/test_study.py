@@ -150,6 +150,20 @@ def test_the_same_tracks_from_a_store_of_the_export(study, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_study_written_to_a_folder_keeps_each_tags_track_alone_and_writes_its_files_whole(study):
+    """Written to a folder, each tag's files are written as it ends and its track alone kept in memory (a season's
+    tags never in memory together): the same tracks and files as the study kept whole (no folder)."""
+    _, files, result, folder = study
+    whole = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=1)
+    pd.testing.assert_frame_equal(result.tracks, whole.tracks, check_exact=True)
+    where = dict(zip(result.tags["tag"], result.tags["folder"]))
+    for tag, light in result.tracked.items():
+        assert light.estimates is None and whole.tracked[tag].estimates is not None
+        written = (folder / "out" / where[tag] / "estimates.csv").read_text()
+        assert written == whole.tracked[tag].estimates.to_csv(index=False)
+
+
+@pytest.mark.slow
 def test_a_tag_never_detected_is_a_row_saying_so(study):
     _, files, _, _ = study
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
