@@ -313,7 +313,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         for i, key in enumerate(keys):
             if isinstance(key, str):
                 first.setdefault(f"{TAGS_FOLDER}/{folder_name(key, 'tag')}", i)  # never one of the study's own names
-        built: dict[int, tuple] = {}  # each tag's folder, matrix, job, notes and water, in the order read
+        built: dict[int, tuple] = {}  # each tag's folder, matrix, job and notes, in the order read
         for i, stored_rows in source.frames([k if isinstance(k, str) else None for k in keys], tally, sheet_deployments,
                                             assigned):
             name, spec = asked[i]
@@ -349,8 +349,6 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 heard = np.isfinite(matrix.toa).sum(axis=1)
                 row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
                 _write_matrix(matrix, workdir / folder, said)
-                if light:  # written: its rows let go (a season's matrices are never in memory together)
-                    matrix = replace(matrix, toa=matrix.toa[:0], pings=matrix.pings.iloc[:0])
                 options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
                            "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
@@ -360,6 +358,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))
+                if light:  # written: its rows let go (a season's matrices are never in memory together)
+                    matrix = replace(matrix, toa=matrix.toa[:0], pings=matrix.pings.iloc[:0])
                 built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
                                              options), said)
                 row["folder"] = folder
