@@ -51,9 +51,7 @@ class StudyResult:
         reason and serial), the clocks, the tags, the notes.
     tracked : dict
         Each tracked tag's own outcome (:class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`: ``track``,
-        ``estimates`` (every estimator's rows), ``summary``), by tag; with ``out``, written to the tag's folder as
-        it ends and its track alone kept (``estimates`` None: its ``estimates.csv``; a reference tag whole), so that
-        a season's tags are never in memory together.
+        ``estimates``, ``summary``), by tag (with ``out``, ``estimates`` None: in the tag's folder, not memory).
     out : Path or None
     reference_tags : pandas.DataFrame
         ``reference_tags.csv``: each reference tag's place against its known position and each sync tag left out of

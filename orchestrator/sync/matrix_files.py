@@ -37,15 +37,25 @@ def sensor_depth(outcome: ToaOutcome) -> tuple[np.ndarray | None, str | None]:
 
 
 def write_toa_folder(outcome: ToaOutcome, out: Path) -> None:
+    """:func:`write_toa_files` into ``out``, all or nothing."""
+    with staged_directory(out) as tmp:
+        write_toa_files(outcome, tmp)
+
+
+def write_toa_files(outcome: ToaOutcome, folder: Path, notes: list[str] | None = None) -> None:
     """``toa.txt`` (the replay's format: a header of receiver names, ``NA`` where not heard, [s] from
     ``origin_epoch_s``; no header where every name is a number:
     :func:`~sblsim.orchestrator.sync.toa.header_line`; the tag's depth per ping
     first where its sensor gives one in 3-D, :func:`sensor_depth`), ``receivers.csv`` (``name, x_m, y_m[, z_m]``),
-    ``pings.csv`` and ``toa.json``, all or nothing."""
-    with staged_directory(out) as tmp:
-        write_matrix(outcome, tmp, sensor_depth(outcome)[0])
-        outcome.pings.to_csv(tmp / "pings.csv", index=False, float_format="%.9f")
-        (tmp / "toa.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
+    ``pings.csv`` and ``toa.json`` into ``folder`` (made where missing); the sensor's note, where there is one,
+    appended to ``notes``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    depth, note = sensor_depth(outcome)
+    if note and notes is not None:
+        notes.append(note)
+    write_matrix(outcome, folder, depth)
+    outcome.pings.to_csv(folder / "pings.csv", index=False, float_format="%.9f")
+    (folder / "toa.json").write_text(json.dumps(outcome.summary, indent=2, allow_nan=False) + "\n")
 
 
 def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = None) -> tuple[Path, Path]:
@@ -72,4 +82,4 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     return toa, receivers
 
 
-__all__ = ["sensor_depth", "write_matrix", "write_toa_folder"]
+__all__ = ["sensor_depth", "write_matrix", "write_toa_files", "write_toa_folder"]

@@ -33,7 +33,6 @@ latitude, longitude and UTC.
 
 from __future__ import annotations
 
-import json
 import os
 import time as clock
 from dataclasses import dataclass, field, replace
@@ -56,7 +55,7 @@ from sblsim.orchestrator.readers.tag_sheet import TagSheet, TagSpec, spec_for
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.readers.water import read_temperature_series
 from sblsim.orchestrator.store.read import is_store
-from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
+from sblsim.orchestrator.sync.matrix_files import write_toa_files
 from sblsim.orchestrator.sync.study_sync import rounding_warning
 from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
@@ -348,7 +347,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                     "interval_warning") else []
                 heard = np.isfinite(matrix.toa).sum(axis=1)
                 row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
-                _write_matrix(matrix, workdir / folder, said)
+                write_toa_files(matrix, workdir / folder, said)
                 options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
                            "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
@@ -455,18 +454,6 @@ def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
         return None, {}
     return bottom, {"source": "bottom_depth", "rule": "the deepest bottom_depth of the deployments that heard the tag",
                     "per_tag_m": {}}
-
-
-def _write_matrix(matrix, folder: Path, notes: list[str]) -> None:
-    """A tag's ``toa.txt`` (with its depth per ping where the sensor gives one and the receivers are in 3-D),
-    ``receivers.csv``, ``pings.csv`` and ``toa.json``."""
-    folder.mkdir(parents=True, exist_ok=True)
-    depth, note = sensor_depth(matrix)
-    if note:
-        notes.append(note)
-    write_matrix(matrix, folder, depth)
-    matrix.pings.to_csv(folder / "pings.csv", index=False, float_format="%.9f")
-    (folder / "toa.json").write_text(json.dumps(matrix.summary, indent=2, allow_nan=False) + "\n")
 
 
 def combined_tracks(outcomes: dict[str, Any], matrices: dict[str, Any]) -> pd.DataFrame:

@@ -241,7 +241,8 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
     from sblsim.orchestrator.readers.tag_sheet import TagSpec
     from sblsim.orchestrator.readers.toa_matrix import read_toa
     from sblsim.orchestrator.sync.toa import ToaOutcome
-    from sblsim.orchestrator.telemetry.study import _tag_detections, _write_matrix
+    from sblsim.orchestrator.sync.matrix_files import write_toa_files
+    from sblsim.orchestrator.telemetry.study import _tag_detections
 
     spec = TagSpec("A69-9002-1", sensor="depth", slope=0.5, intercept=-1.0)
     mine = pd.DataFrame({"sensor_value": [10.0, 4.5, np.nan], "sensor_unit": ["ADC", "m", ""]})
@@ -253,7 +254,7 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
     for dim, expected in ((3, [4.0, np.nan]), (2, None)):
         matrix = ToaOutcome(toa, ["1623", "1626"], np.zeros((2, dim)), pings, {"tag": "A"}, 0.0)
         notes: list[str] = []
-        _write_matrix(matrix, tmp_path / str(dim), notes)
+        write_toa_files(matrix, tmp_path / str(dim), notes)
         read = read_toa(tmp_path / str(dim) / "toa.txt")
         if expected is None:
             assert read.depth is None and read.names is None and "not used by the tracker" in notes[0]
