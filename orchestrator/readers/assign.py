@@ -106,10 +106,7 @@ def assign(detections: Detections, deployments: Deployments, detected: Any = Non
     keep = (where >= 0) & ~stray
     kept = renamed.assign(tag=tags)[keep].reset_index(drop=True)
     if not len(kept) and refuse_empty:
-        raise ModelError(f"detections: none of {detections.source!r} is inside a deployment of {deployments.source!r} "
-                         f"(serials detected: {', '.join(sorted(map(str, set(serial)))[:8])}; in the table: "
-                         f"{', '.join(sorted(map(str, table['serial'].unique()))[:8])}); allowed: detections at the "
-                         "table's receivers between their deployment and recovery")
+        raise nothing_kept(detections.source, serial, deployments)
     per = pd.Series(serial[~keep]).value_counts()
     set_aside = {"receiver_not_in_table": int((~known).sum()), "outside_deployment": int(outside.sum()),
                  "sync_tag_outside_deployment": int((stray & (where >= 0)).sum()),
@@ -117,4 +114,13 @@ def assign(detections: Detections, deployments: Deployments, detected: Any = Non
     return Assigned(replace(detections, frame=kept), hydrophones, set_aside, keep)
 
 
-__all__ = ["Assigned", "SET_ASIDE", "assign"]
+def nothing_kept(source: str, serials, deployments: Deployments) -> ModelError:
+    """The refusal of detections none of which is inside a deployment (one line naming the serials detected, those
+    of the table and what is allowed)."""
+    return ModelError(f"detections: none of {source!r} is inside a deployment of {deployments.source!r} (serials "
+                      f"detected: {', '.join(sorted(map(str, set(serials)))[:8])}; in the table: "
+                      f"{', '.join(sorted(map(str, deployments.table['serial'].unique()))[:8])}); allowed: "
+                      "detections at the table's receivers between their deployment and recovery")
+
+
+__all__ = ["Assigned", "SET_ASIDE", "assign", "nothing_kept"]

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.sync.resolution import time_quantum
-from sblsim.orchestrator.readers.assign import SET_ASIDE, Assigned, assign
+from sblsim.orchestrator.readers.assign import SET_ASIDE, Assigned, assign, nothing_kept
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import NETWORKS, Detections
 from sblsim.orchestrator.store.read import read_any
@@ -196,8 +196,8 @@ class StudyDetections:
             frame = got.detections.frame
             sync.append(frame[frame["tag"].isin(labels)])
         tally = Tally.merged(parts)
-        if not tally.used:  # said as the whole file's reader says it
-            assign(self.data, deployments)
+        if not tally.used:  # said as of the whole file
+            raise nothing_kept(self.data.source, tally.serials, deployments)
         rows = reader_order(pd.concat(sync, ignore_index=True), self.data.format)
         return Assigned(replace(self.data, frame=rows), hydrophones, tally.set_aside, None, tally.span), tally
 

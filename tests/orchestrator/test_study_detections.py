@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import read_detections
@@ -89,3 +90,20 @@ def test_a_file_read_whole_gives_its_own_rows_in_the_order_asked(sim, tmp_path):
     assert tally.tags.to_dict() == by_hand.to_dict()
     day = np.floor(assigned.detections.frame["time"].to_numpy() / 86400.0)
     assert int(tally.daily["detections"].sum()) == len(day) == tally.used
+
+
+def test_a_store_none_of_whose_detections_is_in_a_deployment_is_refused_as_its_file(sim, tmp_path):
+    files = sim.write(tmp_path / "f", "vue")
+    sheet = pd.read_csv(files["deployments"], dtype=str, keep_default_na=False)
+    for column in ("deploy_date_time", "recover_date_time"):  # every deployment a year before the detections
+        sheet[column] = (pd.to_datetime(sheet[column]) - pd.DateOffset(years=1)).dt.strftime("%Y-%m-%dT%H:%M:%SZ")
+    sheet.to_csv(files["deployments"], index=False)
+    ingest(files["detections"], tmp_path / "store", piece_bytes=16384)
+    deployments = read_deployments(files["deployments"])
+    with pytest.raises(ModelError) as whole:
+        assign(read_detections(files["detections"], None), deployments)
+    with pytest.raises(ModelError) as stored:
+        StudyDetections.stored(tmp_path / "store").assigned(deployments)
+    said = str(stored.value)
+    assert said.startswith("detections: none of ") and "\n" not in said and "serials detected: 461000" in said
+    assert said.split("(serials")[1] == str(whole.value).split("(serials")[1]  # the file's own line's serials
