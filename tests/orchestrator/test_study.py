@@ -240,8 +240,8 @@ def test_a_depth_sensor_reaches_the_tracker_only_in_3d(tmp_path):
     kept as the header) only where the receivers have depths; in 2-D it is said in a note and left out."""
     from sblsim.orchestrator.readers.tag_sheet import TagSpec
     from sblsim.orchestrator.readers.toa_matrix import read_toa
-    from sblsim.orchestrator.sync.toa import ToaOutcome
     from sblsim.orchestrator.sync.matrix_files import write_toa_files
+    from sblsim.orchestrator.sync.toa import ToaOutcome
     from sblsim.orchestrator.telemetry.study import _tag_detections
 
     spec = TagSpec("A69-9002-1", sensor="depth", slope=0.5, intercept=-1.0)
