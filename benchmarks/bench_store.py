@@ -2,7 +2,7 @@
 season tracked from its store (the issue "a season, not a week").
 
 Run:  python benchmarks/bench_store.py [--receivers 20] [--tags 100] [--days 7] [--formats vue,fathom,glatos]
-      [--season-days 30] [--season-tags 40] [--workers 2] [--no-season]
+      [--season-days 30[,91...]] [--season-tags 40] [--workers 2] [--no-season] [--no-reading]
 
 Reading: the simulated study of ``benchmarks/bench_telemetry_study.py`` (``--days``, ``--tags``) written as each
 export; in a fresh process each, the file read whole by the readers (:func:`read_detections`: the baseline, refused
@@ -10,10 +10,12 @@ where the file is beyond the whole-file reader's 256 MiB or 3,000,000 rows) and 
 (:func:`sblsim.store`): the wall time, the detections per second, the process's peak memory, the store's size, and
 the store's time over the whole read's (the ratio).
 
-Season (unless ``--no-season``): ``--season-days`` of ``--season-tags`` tags as a VUE export, which ``sblsim track``
-refuses as a file (its size); stored, then tracked from the store (:func:`sblsim.track` on the store's folder,
-``--workers`` processes) in a fresh process: the store's and the track's wall times and peak memory, the tags
-tracked. A JSON line last.
+Season (unless ``--no-season``): ``--season-days`` of ``--season-tags`` tags as a VUE export (a file ``sblsim track``
+refuses whole beyond its size); stored, then tracked from the store (:func:`sblsim.track` on the store's folder into
+a folder, ``--workers`` processes) in a fresh process: the store's and the track's wall times and peak memory (the
+study's own process: its workers hold a tag each), the tags tracked. Several lengths (``--season-days 28,91``): each
+in turn, with its time per day and its peak over the first length's (the issue's targets: a season's time linear in
+its length, its peak within 20 % whatever the length and at most 4 GiB). A JSON line last.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from sblsim.orchestrator.telemetry.simulate import simulate_study
 #: The issue's targets: detections read into the store per second [1/s], the peak of the reading [GiB].
 TARGET_RATE = 1e6
 TARGET_PEAK_GIB = 1.0
+#: The issue's target for a season's study: its peak [GiB].
+TARGET_SEASON_GIB = 4.0
 
 
 def _peak_gib() -> float:
@@ -120,19 +124,29 @@ def main() -> None:
     parser.add_argument("--tags", type=int, default=100)
     parser.add_argument("--days", type=float, default=7.0)
     parser.add_argument("--formats", default="vue,fathom,glatos")
-    parser.add_argument("--season-days", type=float, default=30.0)
+    parser.add_argument("--season-days", default="30", help="days, or several separated by commas")
     parser.add_argument("--season-tags", type=int, default=40)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--no-season", action="store_true", help="time the reading only")
+    parser.add_argument("--no-reading", action="store_true", help="time the season only")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        rows = reading(args.receivers, args.tags, args.days, args.formats.split(","), folder)
-        long = None if args.no_season else season(args.receivers, args.season_tags, args.season_days,
-                                                 args.workers, folder)
-    print(f"targets: {TARGET_RATE:,.0f} detections/s and {TARGET_PEAK_GIB} GiB reading: " + ", ".join(
-        f"{r['format']} {r['rate_per_s']:,.0f}/s {r['store']['peak_gib']:.2f} GiB" for r in rows))
-    print(json.dumps({"reading": rows, "season": long}), file=sys.stdout)
+        rows = [] if args.no_reading else reading(args.receivers, args.tags, args.days, args.formats.split(","),
+                                                  folder)
+        seasons = [] if args.no_season else [season(args.receivers, args.season_tags, float(d), args.workers,
+                                                    folder / f"season_{d}") for d in args.season_days.split(",")]
+    if rows:
+        print(f"targets: {TARGET_RATE:,.0f} detections/s and {TARGET_PEAK_GIB} GiB reading: " + ", ".join(
+            f"{r['format']} {r['rate_per_s']:,.0f}/s {r['store']['peak_gib']:.2f} GiB" for r in rows))
+    for row in seasons:  # against the first length, measured in the same run
+        first = seasons[0]
+        per_day = (row["track"]["seconds"] / row["days"]) / (first["track"]["seconds"] / first["days"])
+        print(f"season {row['days']:g} days: {row['track']['seconds'] / row['days']:.1f} s a day "
+              f"({per_day:.2f} x the {first['days']:g} days'), peak {row['track']['peak_gib']:.2f} GiB "
+              f"({row['track']['peak_gib'] / first['track']['peak_gib']:.2f} x; the targets: within 1.2 x and "
+              f"{TARGET_SEASON_GIB:g} GiB)")
+    print(json.dumps({"reading": rows, "season": seasons}), file=sys.stdout)
 
 
 if __name__ == "__main__":
