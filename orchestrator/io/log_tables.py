@@ -273,7 +273,7 @@ def table_chunks(path: Path, what: str, chunk_bytes: int = CHUNK_BYTES) -> Itera
 
 
 def line_chunks(path: Path, what: str, encoding: str = "utf-8-sig", *, delimiter: str = ",", comments: bool = False,
-                chunk_bytes: int = CHUNK_BYTES) -> Iterator[list[tuple[int, str]]]:
+                chunk_bytes: int = CHUNK_BYTES, max_line_cells: int | None = None) -> Iterator[list[tuple[int, str]]]:
     """A regular text file's numbered lines (split as :func:`~sblsim.orchestrator.io.tables.text_lines`) in pieces
     of about ``chunk_bytes``, each piece ending at a line's end and checked before it is decoded: a line longer than
     :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or of more than
@@ -285,6 +285,8 @@ def line_chunks(path: Path, what: str, encoding: str = "utf-8-sig", *, delimiter
     ----------
     encoding : str
         ``"utf-8-sig"`` (a byte-order mark dropped) or ``"ascii"``.
+    max_line_cells : int, optional
+        The most cells a line holds [1] (default :data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS`).
 
     Yields
     ------
@@ -312,7 +314,8 @@ def line_chunks(path: Path, what: str, encoding: str = "utf-8-sig", *, delimiter
                 break
             if not piece.endswith(b"\n"):  # to the end of its last line (a line too long refused there)
                 piece += _rest_of_line(handle, piece, name, what, first_line, delimiter == ",")
-            check_cells(piece, name, what, delimiter, max_cells=math.inf, comments=comments, first_line=first_line)
+            check_cells(piece, name, what, delimiter, max_cells=math.inf, comments=comments, first_line=first_line,
+                        max_line_cells=max_line_cells)
             try:
                 text = piece.decode("utf-8" if encoding == "utf-8-sig" and offset else encoding)
             except UnicodeDecodeError as exc:

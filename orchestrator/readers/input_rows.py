@@ -13,12 +13,14 @@ from __future__ import annotations
 
 from itertools import chain
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.log_tables import line_chunks
 from sblsim.orchestrator.io.tables import NUMBER, csv_cells, read_lines
 
 #: The largest file read [bytes] and the most rows (pings, receivers, track points).
@@ -30,6 +32,10 @@ MAX_RECEIVERS = 1000
 #: 1 GiB: split a longer matrix in time).
 MAX_ROW_CELLS = MAX_RECEIVERS + 1
 MAX_TOA_CELLS = 2**22
+#: A TOA matrix is read a piece at a time (:func:`row_pieces`): its bounds are its numbers' memory (8 bytes a cell),
+#: not its text's: a season of a tag that pings every 2.5 s (3.1 M pings; at 16 receivers 50 M cells, 0.4 GiB).
+MAX_MATRIX_PINGS = 4_000_000
+MAX_MATRIX_CELLS = 2**26
 #: The allowed times [s] (a time of arrival or a track's time) and coordinates [m].
 MAX_TIME = 1e10
 MAX_COORDINATE = 1e7
@@ -60,6 +66,32 @@ def _rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
     lines = _lines(path, what)
     delimiter = "," if lines and "," in lines[0][1] else " "
     return csv_cells(lines, f"{what}: {str(path)!r}", delimiter)
+
+
+def row_pieces(path: Path, what: str, max_cells: int | None = None) -> Iterator[list[tuple[int, list[str]]]]:
+    """:func:`_rows`' rows a piece at a time (:func:`~sblsim.orchestrator.io.log_tables.line_chunks`, its lines
+    checked before they are parsed: at most :data:`MAX_ROW_CELLS` cells and 1 MiB a line), for a file of any size:
+    the delimiter the first row's, comments and blank lines dropped, each row with its line in the file.
+
+    Raises
+    ------
+    ModelError
+        As :func:`_rows`, but for the file's size; more than ``max_cells`` cells in all (default
+        :data:`MAX_MATRIX_CELLS`; counted to the file's end, its rows no longer kept).
+    """
+    max_cells = MAX_MATRIX_CELLS if max_cells is None else max_cells
+    delimiter, total = None, 0
+    for lines in line_chunks(path, what, delimiter="auto", comments=True, max_line_cells=MAX_ROW_CELLS):
+        kept = [(k, line) for k, line in lines if line.strip() and not line.lstrip().startswith("#")]
+        if kept and delimiter is None:
+            delimiter = "," if "," in kept[0][1] else " "
+        rows = csv_cells(kept, f"{what}: {str(path)!r}", delimiter or " ")
+        total += sum(len(cells) for _, cells in rows)
+        if total <= max_cells:
+            yield rows
+    if total > max_cells:
+        raise ModelError(f"{what}: {str(path)!r} holds {total:,} cells; allowed at most {max_cells:,} cells in a "
+                         "table")
 
 
 def _stripped(cells: list[str]) -> list[str]:
@@ -104,5 +136,5 @@ def _numbers(rows: list[tuple[int, list[str]]], name: str, what: str, header: li
 
 
 
-__all__ = ["MAX_COORDINATE", "MAX_PINGS", "MAX_RECEIVERS", "MAX_ROW_CELLS", "MAX_TIME", "MAX_TOA_BYTES",
-           "MAX_TOA_CELLS", "MISSING"]
+__all__ = ["MAX_COORDINATE", "MAX_MATRIX_CELLS", "MAX_MATRIX_PINGS", "MAX_PINGS", "MAX_RECEIVERS", "MAX_ROW_CELLS",
+           "MAX_TIME", "MAX_TOA_BYTES", "MAX_TOA_CELLS", "MISSING", "row_pieces"]

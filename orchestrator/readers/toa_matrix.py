@@ -15,7 +15,15 @@ from pathlib import Path
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.readers.input_rows import MAX_RECEIVERS, MAX_TIME, _is_cell, _numbers, _rows, _stripped
+from sblsim.orchestrator.readers.input_rows import (
+    MAX_MATRIX_PINGS,
+    MAX_RECEIVERS,
+    MAX_TIME,
+    _is_cell,
+    _numbers,
+    _stripped,
+    row_pieces,
+)
 
 
 @dataclass
@@ -44,24 +52,34 @@ def read_toa(path: Path | str) -> ToaMatrix:
         One line naming the file, the line and column, and the allowed range.
     """
     path, what = Path(path), "toa"
-    rows = _rows(path, what)
-    if not rows:
-        raise ModelError(f"{what}: {str(path)!r} holds no rows; allowed: a matrix of times of arrival [s]")
-    first = _stripped(rows[0][1])
-    names = None
-    if not all(_is_cell(c) for c in first):
-        names, rows = first, rows[1:]
-        if len(set(names)) != len(names):
-            raise ModelError(f"{what}: {str(path)!r}: a receiver name is given twice in the header")
+    names, header, parts, pings = None, None, [], 0
+    for rows in row_pieces(path, what):  # a piece at a time: 8 bytes a cell kept, not its text
+        if header is None and rows:
+            first = _stripped(rows[0][1])
+            if not all(_is_cell(c) for c in first):
+                names, rows = first, rows[1:]
+                if len(set(names)) != len(names):
+                    raise ModelError(f"{what}: {str(path)!r}: a receiver name is given twice in the header")
+            header = names or [f"{k + 1}" for k in range(len(first))]
+            if not 1 <= len(header) <= MAX_RECEIVERS:
+                raise ModelError(f"{what}: {str(path)!r} has {len(header)} columns; allowed 1 to {MAX_RECEIVERS}")
         if not rows:
-            raise ModelError(f"{what}: {str(path)!r} holds a header and no rows")
-    width = len(names) if names else len(first)
-    if not 1 <= width <= MAX_RECEIVERS:
-        raise ModelError(f"{what}: {str(path)!r} has {width} columns; allowed 1 to {MAX_RECEIVERS}")
-    header = names or [f"{k + 1}" for k in range(width)]
+            continue
+        pings += len(rows)
+        if pings > MAX_MATRIX_PINGS:
+            raise ModelError(f"{what}: {str(path)!r} holds more than {MAX_MATRIX_PINGS:,} pings; allowed at most "
+                             f"{MAX_MATRIX_PINGS:,} (split it in time)")
+        depth = names is not None and DEPTH_COLUMN in names
+        parts.append((_numbers(rows, str(path), what, header, -MAX_TIME if depth else 0.0, MAX_TIME, True,
+                               names is not None), np.array([k for k, _ in rows], np.int64)))
+    if header is None:
+        raise ModelError(f"{what}: {str(path)!r} holds no rows; allowed: a matrix of times of arrival [s]")
+    if not parts:
+        raise ModelError(f"{what}: {str(path)!r} holds a header and no rows")
+    values = parts[0][0] if len(parts) == 1 else np.concatenate([v for v, _ in parts])
     if names is None or DEPTH_COLUMN not in names:
-        return ToaMatrix(_numbers(rows, str(path), what, header, 0.0, MAX_TIME, True, names is not None), names)
-    values = _numbers(rows, str(path), what, header, -MAX_TIME, MAX_TIME, True)
+        return ToaMatrix(values, names)
+    lines = np.concatenate([k for _, k in parts])
     at = names.index(DEPTH_COLUMN)
     depth, toa = values[:, at], np.delete(values, at, axis=1)
     receivers = [n for n in names if n != DEPTH_COLUMN]
@@ -69,7 +87,7 @@ def read_toa(path: Path | str) -> ToaMatrix:
         bad = np.argwhere((cells < low) | (cells > high))
         if len(bad):
             i, j = map(int, bad[0])
-            raise ModelError(f"{what}: {str(path)!r} line {rows[i][0]} column {columns[j]}: {cells[i, j]:.10g} is not "
+            raise ModelError(f"{what}: {str(path)!r} line {lines[i]} column {columns[j]}: {cells[i, j]:.10g} is not "
                              f"allowed; allowed: a finite number in [{low:g}, {high:g}] or NA/empty")
     if not receivers:
         raise ModelError(f"{what}: {str(path)!r} holds a depth column and no receiver's")

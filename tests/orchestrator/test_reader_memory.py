@@ -123,7 +123,7 @@ READERS = {
     "tag sheet": (read_tag_sheet, "tags.csv", "transmitter,role,name", "4555,animal,cod", (tables, "MAX_CELLS")),
     "sound speed": (read_sound_speed, "ss.csv", "epo,sound_speed_m_s", "1587877200,1421.3",
                     (tables, "MAX_CELLS")),
-    "toa matrix": (toa.read_toa, "toa.csv", "H1,H2", "1.5,2.5", (input_rows, "MAX_TOA_CELLS")),
+    "toa matrix": (toa.read_toa, "toa.csv", "H1,H2", "1.5,2.5", (input_rows, "MAX_MATRIX_CELLS")),
     "toa receivers": (receivers_file.read_receivers, "hyd.csv", "hydrophone,x_m,y_m", "H1,0,0",
                       (input_rows, "MAX_TOA_CELLS")),
     "truth track": (lambda p: time_series.read_track(p, "truth"), "gps.csv", "x,y,t", "1,2,0.5",

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.telemetry.report.figures_study import WIDTH, used_receivers
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
 from sblsim.orchestrator.telemetry.report.images import Image, figure_image, new_figure
@@ -24,7 +25,7 @@ NO_REASON = "(no reason given)"
 def _positioned(tracks: pd.DataFrame, tag: str) -> pd.DataFrame:
     """A tag's rows of ``tracks.csv`` that hold a position (a row set aside as no ping of its schedule holds
     none: it is counted in ``tags.csv``'s ``set_aside``, not among the rows positioned or flagged)."""
-    mine = tracks[tracks["tag"].astype(str) == tag]
+    mine = tracks[(tracks["tag"] == tag).to_numpy(bool)]  # (a category: its codes compared, no text made)
     placed = np.isfinite(mine[["x", "y", "epoch_s"]].to_numpy(float)).all(axis=1)
     return mine[placed]
 
@@ -154,8 +155,7 @@ def tag_figure(study: StudyFolder, tag: str) -> Image | None:
         a.xaxis.set_major_locator(MaxNLocator(8))
         a.tick_params(labelsize=6, labelbottom=a is axes[-1])
         a.grid(alpha=0.3, lw=0.5)
-    axes[-1].set_xlabel(f"hours from {str(rows['time_utc'].iloc[0])[:16]}Z" if "time_utc" in rows else "hours",
-                        fontsize=7)
+    axes[-1].set_xlabel(f"hours from {iso_utc(rows['epoch_s'].iloc[:1])[0][:16]}Z", fontsize=7)
     fig.suptitle(f"{tag}: {len(rows):,} rows, {int(flagged.sum()):,} flagged", fontsize=8, x=0.01, ha="left")
     return figure_image(fig, f"tag {tag}'s track coloured by its σ and its σ, receivers heard"
                         + (" and depth" if depths else "") + " along the time")

@@ -6,7 +6,10 @@ Each file is taken from the folder only (a link leading out of it refused:
 :func:`~sblsim.orchestrator.io.paths.inside`), read to a bounded size
 (:func:`~sblsim.orchestrator.readers.cells.read_text`), its CSV parsed by pandas into text cells
 (:func:`~sblsim.orchestrator.readers.cells.text_table`) and each number column checked cell by cell
-(:func:`~sblsim.orchestrator.readers.cells.numbers`: a number or empty); a JSON file must hold an object. A tag's own
+(:func:`~sblsim.orchestrator.readers.cells.numbers`: a number or empty); a JSON file must hold an object.
+``tracks.csv``, a season's every ping, is read a piece at a time (:func:`read_tracks`: the lines of each piece
+checked before they are parsed, :func:`~sblsim.orchestrator.io.log_tables.line_chunks`), and of it only the columns
+a report draws are kept, as numbers and categories: no limit of its size but :data:`MAX_TRACK_ROWS`. A tag's own
 folder is found from its id as ``sblsim track`` names it (``tags/<id>/``), never from a path a file gives. The text
 cells are shown in the page as text (the template escapes them). A file missing that a study always has is refused
 in one line; the others (the synchronisation's, the reference tags', the daily detections, a tag's summary) are
@@ -22,8 +25,10 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from pandas.api.types import union_categoricals
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.log_tables import line_chunks
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.readers.cells import numbers, read_text, text_table
@@ -35,6 +40,13 @@ MAX_TABLE_BYTES = 256 * 2**20
 MAX_JSON_BYTES = 64 * 2**20
 MAX_IMAGE_BYTES = 16 * 2**20
 MAX_ROWS = 2_000_000
+#: The most rows of ``tracks.csv`` (and of a tag's ``pings.csv``) a report reads (a row kept in about 60 bytes: 10**7 rows, a season of a hundred
+#: tags, 0.6 GB; its text cells would take some 1.5 kB); its columns kept (the rest of the file is not held).
+MAX_TRACK_ROWS = 50_000_000
+TRACK_TEXT = ("tag", "quality", "quality_reason")
+TRACK_NUMBERS = ("epoch_s", "x", "y", "z", "sigma_x", "sigma_y", "receivers_heard")
+#: The columns of a tag's ``pings.csv`` a report draws (its depth sensor's readings).
+PING_NUMBERS = ("ping", "time", "depth_m")
 #: The numbers a study's tables hold are within this of 0 (times in seconds since 1970, metres in a projected frame).
 BOUND = 1e13
 #: Each table's file, the columns it must have and its number columns (the others are text).
@@ -74,8 +86,10 @@ class StudyFolder:
         The folder as the caller names it (in the page's title and in refusals).
     summary : dict
         ``study.json``.
-    tags, receivers, tracks : pandas.DataFrame
-        ``tags.csv``, ``receivers.csv``, ``tracks.csv`` (number columns as floats, NaN where empty).
+    tags, receivers : pandas.DataFrame
+        ``tags.csv``, ``receivers.csv`` (number columns as floats, NaN where empty).
+    tracks : pandas.DataFrame
+        ``tracks.csv``'s columns a report draws (:func:`read_tracks`).
     daily : pandas.DataFrame or None
         ``detections_daily.csv`` (:mod:`.daily`), None where the folder has none.
     offsets, sync_tags : pandas.DataFrame or None
@@ -153,6 +167,61 @@ def _table(path: Path, shown: str, needed: tuple[str, ...], numeric: tuple[str, 
     return pd.DataFrame(out, index=pd.RangeIndex(len(body)))
 
 
+def read_tracks(folder: Path, label: str) -> pd.DataFrame | None:
+    """``tracks.csv`` in pieces (:func:`read_pieces`): :data:`TRACK_NUMBERS` and :data:`TRACK_TEXT`."""
+    return read_pieces(folder, label, "tracks", TRACK_NUMBERS, TRACK_TEXT)
+
+
+def read_pieces(folder: Path, label: str, key: str, kept: tuple[str, ...], text: tuple[str, ...] = (),
+                within: str = "") -> pd.DataFrame | None:
+    """One of :data:`TABLES` of any length (``tracks.csv``, a tag's ``pings.csv``: a season's every ping) in pieces
+    (:func:`~sblsim.orchestrator.io.log_tables.line_chunks`), each parsed as :func:`read_table` parses a table and
+    let go: of its columns, ``kept`` as floats (NaN where empty) and ``text`` as categories, where the file has them;
+    None where the file is not there.
+
+    Raises
+    ------
+    ModelError
+        One line: more than :data:`MAX_TRACK_ROWS` rows, a line too long or too wide, not UTF-8 CSV text, without a
+        column it must have, or a number cell that is not a number.
+    """
+    name, needed, _ = TABLES[key]
+    name = f"{within}/{name}" if within else name
+    path = _path(folder, name, label)
+    if not path.is_file():
+        return None
+    shown, what = _shown(label, name), "report"
+    head, rows, parts = None, 0, []
+    for lines in line_chunks(path, what):
+        while head is None and lines:  # its first line that is not blank, checked before any row is parsed
+            head, lines = (lines[0][1] if lines[0][1].strip() else None), lines[1:]
+            missing = [] if head is None else [c for c in needed if c not in text_table(head, shown, what, 0)[0]]
+            if missing:
+                raise ModelError(f"{what}: {shown!r} has no column {', '.join(missing)}; allowed: the table as "
+                                 "sblsim track writes it")
+        if not lines:
+            continue
+        header, body, where = text_table("\n".join([head, *(line for _, line in lines)]), shown, what, MAX_TRACK_ROWS,
+                                         lines[0][0] - 1)
+        rows += len(body)
+        if rows > MAX_TRACK_ROWS:
+            raise ModelError(f"{what}: {shown!r} holds more than {MAX_TRACK_ROWS:,} rows; allowed at most "
+                             f"{MAX_TRACK_ROWS:,}")
+        at = {h: k for k, h in enumerate(header)}
+        parts.append({c: numbers(body[at[c]], what, shown, where, c, -BOUND, BOUND, missing=True)
+                      for c in kept if c in at}
+                     | {c: pd.Categorical(body[at[c]].to_numpy(dtype=object)) for c in text if c in at})
+    if head is None:
+        raise ModelError(f"{what}: {shown!r} holds no header; allowed: a header line and rows")
+    if not parts:
+        return pd.DataFrame({c: pd.Series(dtype=object if c in text else float) for c in needed})
+    out = {}
+    for c in parts[0]:
+        values = [p[c] for p in parts]
+        out[c] = union_categoricals(values) if c in text else np.concatenate(values)
+    return pd.DataFrame(out, index=pd.RangeIndex(rows))
+
+
 def read_json(folder: Path, label: str, name: str) -> dict[str, Any] | None:
     """A JSON object of the folder, None where the file is not there.
 
@@ -215,7 +284,8 @@ def read_folder(folder: Path | str, label: str | None = None) -> StudyFolder:
     if not folder.is_dir():
         raise ModelError(f"report: {label!r} is not a folder; allowed: a study's folder (sblsim track --out)")
     summary = read_json(folder, label, "study.json")
-    tables = {key: read_table(folder, label, key) for key in REQUIRED}
+    tables = {key: read_table(folder, label, key) if key != "tracks" else read_tracks(folder, label)
+              for key in REQUIRED}
     missing = [TABLES[k][0] for k, v in tables.items() if v is None] + (["study.json"] if summary is None else [])
     if missing:
         raise ModelError(f"report: {label!r} holds no {', '.join(missing)}; allowed: a study's folder (sblsim track "
@@ -232,10 +302,11 @@ def read_folder(folder: Path | str, label: str | None = None) -> StudyFolder:
         summary_json = read_json(folder, label, f"{own}/summary.json")
         if summary_json is not None:
             out.tag_summaries[tag] = summary_json
-        pings = read_table(folder, label, "pings", own)
+        pings = read_pieces(folder, label, "pings", PING_NUMBERS, within=own)
         if pings is not None and "depth_m" in pings and np.isfinite(pings["depth_m"].to_numpy(float)).any():
             out.tag_pings[tag] = pings
     return out
 
 
-__all__ = ["REFERENCE_FILE", "StudyFolder", "TABLES", "read_folder", "read_json", "read_table", "tag_folder"]
+__all__ = ["REFERENCE_FILE", "StudyFolder", "TABLES", "read_folder", "read_json", "read_pieces", "read_table",
+           "read_tracks", "tag_folder"]
