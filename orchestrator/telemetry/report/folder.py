@@ -40,8 +40,9 @@ MAX_TABLE_BYTES = 256 * 2**20
 MAX_JSON_BYTES = 64 * 2**20
 MAX_IMAGE_BYTES = 16 * 2**20
 MAX_ROWS = 2_000_000
-#: The most rows of ``tracks.csv`` (and of a tag's ``pings.csv``) a report reads (a row kept in about 60 bytes: 10**7 rows, a season of a hundred
-#: tags, 0.6 GB; its text cells would take some 1.5 kB); its columns kept (the rest of the file is not held).
+#: The most rows of ``tracks.csv`` (and of a tag's ``pings.csv``) a report reads (a row kept in about 60 bytes:
+#: 10**7 rows, a season of a hundred tags, 0.6 GB; its text cells would take some 1.5 kB), and the columns of
+#: ``tracks.csv`` kept (the rest of the file is not held).
 MAX_TRACK_ROWS = 50_000_000
 TRACK_TEXT = ("tag", "quality", "quality_reason")
 TRACK_NUMBERS = ("epoch_s", "x", "y", "z", "sigma_x", "sigma_y", "receivers_heard")
