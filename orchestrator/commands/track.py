@@ -278,7 +278,7 @@ def main(args: argparse.Namespace) -> int:
                                                                        "tz", "refine_positions", "survey_sigma")},
                        args.toa_sigma, args.force_interval, args.tz, args.refine_positions, args.survey_sigma) \
         | water_arguments(args.temperature_file, args.water_depth, ("--temperature-file", "--water-depth"))
-    options["spatial"] = args.spatial
+    options |= {"spatial": args.spatial, "keep_tracks": False}  # (no table returned: tracks.csv a tag at a time)
     out = output_folder(args.out, Path("results") / f"study_{folder_name(args.detections[0].stem)}", args.force,
                         "study.json", "study")
     from sblsim.orchestrator.readers.study_files import DetectionFiles  # pandas: loaded as the study starts

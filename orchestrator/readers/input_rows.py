@@ -2,7 +2,9 @@
 track, a sound-speed series, a burst sequence: :mod:`.toa`, :mod:`.receivers_file`, :mod:`.time_series`).
 
 Each file must be a regular file (a FIFO or a device such as ``/dev/zero`` is refused before it is opened) and is
-read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read. Its rows are
+read to at most :data:`MAX_TOA_BYTES` bytes and :data:`MAX_PINGS` rows, counted in what was read; but a TOA matrix, a
+season's every ping, read a piece at a time (:func:`row_pieces`) to at most :data:`MAX_MATRIX_PINGS` rows and
+:data:`MAX_MATRIX_CELLS` cells, its numbers' memory (8 bytes a cell). Its rows are
 parsed by the csv module (:func:`~sblsim.orchestrator.io.tables.csv_cells`: a quoted cell may hold the separator),
 every row must have the header's (or the first row's) number of cells, and every cell is checked (finite, within
 its range); no name or text in a file is ever taken as a path. An error is one line naming the file, the line as

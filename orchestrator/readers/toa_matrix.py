@@ -1,7 +1,8 @@
 """Reading recorded times of arrival at a fixed array (an inverted LBL), as hostile input (:mod:`.input_rows`): the
 TOA matrix, one row per ping, one column per receiver, comma-separated (if its first row holds a comma) or
 whitespace-separated, an optional header of receiver names; ``NA`` or an empty cell where the ping was not heard
-(Lake Hald's ``toa.txt``). A pseudo-random tag's burst sequence: :mod:`.burst_sequence`.
+(Lake Hald's ``toa.txt``); read a piece at a time (:func:`~.input_rows.row_pieces`: a season's tag of millions of
+pings in its numbers' memory). A pseudo-random tag's burst sequence: :mod:`.burst_sequence`.
 
 The files read beside them: the receivers' positions (:mod:`.receivers_file`), a track and a measured sound-speed
 series (:mod:`.time_series`).
@@ -49,7 +50,8 @@ def read_toa(path: Path | str) -> ToaMatrix:
     Raises
     ------
     ModelError
-        One line naming the file, the line and column, and the allowed range.
+        One line naming the file, the line and column, and the allowed range; more than
+        :data:`~.input_rows.MAX_MATRIX_PINGS` pings or :data:`~.input_rows.MAX_MATRIX_CELLS` cells.
     """
     path, what = Path(path), "toa"
     names, header, parts, pings = None, None, [], 0

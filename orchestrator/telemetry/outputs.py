@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import textwrap
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -27,6 +27,7 @@ from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry import reference_tags as references
 from sblsim.orchestrator.telemetry.report.page import study_report
 from sblsim.orchestrator.telemetry.study import StudyOutcome
+from sblsim.orchestrator.telemetry.study_tracks import tag_tracks
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
 #: The characters of a line of the text beside the map; a receiver's label's offsets from it [pt], tried in turn.
@@ -53,35 +54,43 @@ def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
     None where the positions have no CRS. A receiver is a point with its deployment's fields, ``used`` (true),
     its kept ``detections`` and ``tags_tracked`` (the tracked tags it heard, separated by commas); a track is a
     line of its rows not flagged."""
+    features = _features(outcome)
+    return None if features is None else {"type": "FeatureCollection", "features": [plain(f) for f in features]}
+
+
+def _features(outcome: StudyOutcome) -> Iterator[dict[str, Any]] | None:
+    """:func:`geojson`'s features, a tag's track at a time; None where the positions have no CRS."""
     table = outcome.deployments.written()
     if "used" in table:
         table = table[table["used"].to_numpy(bool)]
     if outcome.deployments.frame is None or not np.isfinite(table["lat"].to_numpy(float)).all():
         return None
+    return _feature_rows(outcome, table)
+
+
+def _feature_rows(outcome: StudyOutcome, table) -> Iterator[dict[str, Any]]:
     by_receiver: dict[str, list[str]] = {}
     for tag, names in _heard(outcome).items():
         for name in names:
             by_receiver.setdefault(name, []).append(tag)
-    features = []
     for row in table.to_dict("records"):
-        features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": [row["lon"], row["lat"]]},
+        yield ({"type": "Feature", "geometry": {"type": "Point", "coordinates": [row["lon"], row["lat"]]},
                          "properties": {"kind": "receiver", "receiver": row["receiver"], "serial": row["serial"],
                                         "station": row["station"], "sync_tag": row["sync_tag"],
                                         "start_utc": row["start_utc"], "end_utc": row["end_utc"], "used": True,
                                         "detections": int(row.get("detections", 0)),
                                         "tags_tracked": ",".join(by_receiver.get(row["receiver"], []))}})
-    for tag, rows in outcome.tracks.groupby("tag", sort=False):
+    for tag, rows in tag_tracks(outcome.tracks, outcome.parts):
         ok = rows[(rows["quality"] != "flagged") & rows["lat"].notna()]
         if len(ok) < 2:
             continue
-        features.append({"type": "Feature",
+        yield ({"type": "Feature",
                          "geometry": {"type": "LineString",
                                       "coordinates": np.c_[ok["lon"].to_numpy(float), ok["lat"].to_numpy(float)]
                                       .round(8).tolist()},
                          "properties": {"kind": "track", "tag": tag, "rows": int(len(ok)),
                                         "flagged_rows_left_out": int((rows["quality"] == "flagged").sum()),
                                         "first_utc": ok["time_utc"].iloc[0], "last_utc": ok["time_utc"].iloc[-1]}})
-    return {"type": "FeatureCollection", "features": plain(features)}
 
 
 def _short(reason: str) -> str:
@@ -178,9 +187,20 @@ def _used(outcome: StudyOutcome):
     return table.reset_index(drop=True)
 
 
-def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float]) -> list:
-    """The receivers used (filled where they heard a tag tracked), each tracked tag's rows not flagged and, for
-    up to ten tags, its receivers ringed in its colour; the receivers' labels (returned)."""
+def _drawn(outcome: StudyOutcome) -> list[tuple[str, np.ndarray, np.ndarray, int]]:
+    """Each tag with a row not flagged, in ``tracks.csv``'s order: its tag, those rows' ``x`` and ``y`` [m] and its
+    rows' count (a tag's rows at a time: 16 bytes of a row kept)."""
+    out = []
+    for tag, rows in tag_tracks(outcome.tracks, outcome.parts):
+        ok = rows[rows["quality"] != "flagged"]
+        if len(ok):
+            out.append((tag, ok["x"].to_numpy(float), ok["y"].to_numpy(float), len(rows)))
+    return out
+
+
+def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float], tags: list) -> list:
+    """The receivers used (filled where they heard a tag tracked), each tracked tag's rows not flagged (``tags``:
+    :func:`_drawn`) and, for up to ten tags, its receivers ringed in its colour; the receivers' labels (returned)."""
     import matplotlib.pyplot as plt
 
     heard = _heard(outcome)
@@ -191,15 +211,12 @@ def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float]) -> list
         if mask.any():
             ax.plot(rx[mask], ry[mask], "^", ms=6, zorder=3, label=f"{said} ({int(mask.sum())})", **style)
     colours = plt.get_cmap("tab10").colors
-    ok = outcome.tracks[outcome.tracks["quality"] != "flagged"]
-    tags = list(ok.groupby("tag", sort=False))
-    every = outcome.tracks.groupby("tag", sort=False).size()
     ringed = len(tags) <= len(colours)
     position = dict(zip(table["receiver"], zip(rx, ry)))
-    for k, (tag, rows) in enumerate(tags):
+    for k, (tag, x, y, every) in enumerate(tags):
         colour = colours[k % len(colours)]
-        ax.plot(rows["x"] - origin[0], rows["y"] - origin[1], ".-", ms=2, lw=0.5, color=colour, alpha=0.85,
-                label=f"{tag}: {len(rows)} of {every[tag]} rows, its receivers ringed" if ringed else None)
+        ax.plot(x - origin[0], y - origin[1], ".-", ms=2, lw=0.5, color=colour, alpha=0.85,
+                label=f"{tag}: {len(x)} of {every} rows, its receivers ringed" if ringed else None)
         if ringed:
             points = np.array([position[n] for n in heard.get(tag, []) if n in position]).reshape(-1, 2)
             ax.plot(points[:, 0], points[:, 1], "o", mfc="none", mec=colour, ms=10 + 3.5 * k, mew=1.0, zorder=2)
@@ -217,15 +234,15 @@ def study_map(outcome: StudyOutcome):
     from matplotlib.ticker import MaxNLocator
 
     table = _used(outcome)
-    ok = outcome.tracks[outcome.tracks["quality"] != "flagged"]
-    xs = np.r_[table["x_m"].to_numpy(float), ok["x"].to_numpy(float)]
-    ys = np.r_[table["y_m"].to_numpy(float), ok["y"].to_numpy(float)]
+    tags = _drawn(outcome)
+    xs = np.concatenate([table["x_m"].to_numpy(float), *(x for _, x, _, _ in tags)])
+    ys = np.concatenate([table["y_m"].to_numpy(float), *(y for _, _, y, _ in tags)])
     finite = np.isfinite(xs) & np.isfinite(ys)
     spans = (np.ptp(xs[finite]), np.ptp(ys[finite])) if finite.any() else (0.0, 0.0)
     width = 7.0 * float(np.clip(spans[0] / spans[1] if spans[1] > 0 else 1.0, 0.75, 1.6))  # the data's shape
     fig, (ax, side) = plt.subplots(1, 2, figsize=(width + 4.2, 8), width_ratios=(width, 3.6))
     origin = tuple(float(np.floor(np.min(v[finite]) / 1000.0) * 1000.0) if finite.any() else 0.0 for v in (xs, ys))
-    texts = _draw(ax, outcome, table, origin)
+    texts = _draw(ax, outcome, table, origin, tags)
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.xaxis.set_major_locator(MaxNLocator(max(3, int(width / 1.1))))
     ax.tick_params(labelsize=7)
@@ -275,16 +292,23 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
             write(tag, folder / name)
     if outcome.sync is not None:
         write_sync(outcome.sync, folder / "sync")
-    outcome.tracks.to_csv(folder / "tracks.csv", index=False)
+    if outcome.parts is not None:  # a tag's rows at a time, from its own file
+        outcome.parts.write(folder / "tracks.csv")
+    else:
+        outcome.tracks.to_csv(folder / "tracks.csv", index=False)
     outcome.tags.to_csv(folder / "tags.csv", index=False)
     outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
     references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
     if outcome.positions is not None:
         outcome.positions.to_csv(folder / "positions.csv", index=False)
     (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
-    shapes = geojson(outcome)
-    if shapes is not None:
-        (folder / "tracks.geojson").write_text(json.dumps(shapes, allow_nan=False) + "\n")
+    features = _features(outcome)
+    if features is not None:  # as json.dumps writes the whole collection, a feature at a time
+        with open(folder / "tracks.geojson", "w") as handle:
+            handle.write('{"type": "FeatureCollection", "features": [')
+            for k, feature in enumerate(features):
+                handle.write((", " if k else "") + json.dumps(plain(feature), allow_nan=False))
+            handle.write("]}\n")
     fig = study_map(outcome)
     try:
         fig.savefig(folder / "map.png", dpi=110)

@@ -64,6 +64,7 @@ from sblsim.orchestrator.telemetry.reference_tags import score as score_referenc
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
+from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
@@ -83,9 +84,6 @@ TAG_COLUMNS = ("tag", "transmitter", "name", "role", "motion", "ping_type_stated
 #: The columns of ``tags.csv`` that are counts (whole numbers; empty for a tag never detected).
 COUNT_COLUMNS = ("detections", "receivers", "pings", "pings_at_once", "positioned", "set_aside", "not_positioned",
                  "flagged")
-#: The columns of ``tracks.csv`` (``z`` and ``sigma_z`` after ``y`` and ``sigma_y`` in 3-D).
-TRACK_COLUMNS = ("tag", "time_utc", "epoch_s", "lat", "lon", "x", "y", "sigma_x", "sigma_y", "receivers_heard",
-                 "quality", "quality_reason")
 
 
 @dataclass
@@ -94,8 +92,9 @@ class StudyOutcome:
 
     Attributes
     ----------
-    tracks : pandas.DataFrame
-        ``tracks.csv``: every tracked tag's rows (:data:`TRACK_COLUMNS`), by tag and time.
+    tracks : pandas.DataFrame or None
+        ``tracks.csv``: every tracked tag's rows (:data:`~.study_tracks.TRACK_COLUMNS`), by tag and time; None where
+        they are read from the tags' files as they are written (``parts``).
     tags : pandas.DataFrame
         ``tags.csv``: one row per tag asked for (:data:`TAG_COLUMNS`).
     deployments : Deployments
@@ -116,6 +115,8 @@ class StudyOutcome:
     written : set of str
         The tags' folders whose track files are written already (``write_tags``: their outcomes hold their track
         alone, their matrices no rows).
+    parts : TrackParts or None
+        ``tracks.csv`` a tag at a time from the tags' own files (``keep_tracks`` False: the outcomes hold no track).
     """
 
     tracks: pd.DataFrame
@@ -128,6 +129,7 @@ class StudyOutcome:
     daily: Any = None
     positions: Any = None
     written: set = field(default_factory=set)
+    parts: TrackParts | None = None
 
 
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
@@ -181,7 +183,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
               water_depth: float | None = None, force_interval: bool = False, spatial: Path | None = None,
               tz: str | None = None, refine_positions: bool = False,
               survey_sigma: float | None = None, resume: Resume | None = None,
-              write_tags: bool = False) -> StudyOutcome:
+              write_tags: bool = False, keep_tracks: bool = True) -> StudyOutcome:
     """Every tag of a study tracked (the module docstring).
 
     Parameters
@@ -250,6 +252,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         ``errors``, ``bound`` and ``set_aside`` None; its matrix without rows; a reference tag kept whole, for its
         scoring), so that a season's tags are never in memory together; not with ``refine_positions`` (the
         refinement reads every moving tag's whole outcome).
+    keep_tracks : bool
+        With ``write_tags``, False: not even a tag's track kept (``StudyOutcome.parts``: ``tracks.csv`` written from
+        the tags' files, ``StudyOutcome.tracks`` None), so that a season's rows are never in memory together.
 
     Returns
     -------
@@ -384,6 +389,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         by_folder = {folder: name for name, folder in folders.items()}
         specs = dict(asked)
         tick = clock.perf_counter()
+        parts = TrackParts(workdir) if light and not keep_tracks else None
 
         def done(folder: str, result):
             name = by_folder[folder]
@@ -393,7 +399,11 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             if ended is not None:
                 ended(rows[name])
             if light and not isinstance(result, str) and specs[name].role != "reference":
-                return written_light(result, workdir / folder)  # its files now, its track alone kept
+                light_outcome = written_light(result, workdir / folder)  # its files now, its track alone kept
+                if parts is None or rows[name]["status"] != "tracked":
+                    return light_outcome
+                parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
+                return replace(light_outcome, track=None)
             return None
 
         kept = 0 if resume is None else resume.kept
@@ -405,7 +415,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
         table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
         table_tags = table_tags.astype({c: "Int64" for c in COUNT_COLUMNS})  # counts as counts, empty where none
-        tracks = combined_tracks(outcomes, matrices)
+        tracks = combined_tracks(outcomes, matrices) if parts is None else None
         summary["tags"] = {"asked": len(asked), "tracked": int((table_tags["status"] == "tracked").sum()),
                            "refused": int((table_tags["status"] == "refused").sum()),
                            "reasons": {str(k): int(v) for k, v in table_tags["reason_code"].value_counts().items()
@@ -413,7 +423,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
         return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily,
-                            written={f for f in outcomes if outcomes[f].estimates is None})
+                            written={f for f in outcomes if outcomes[f].estimates is None}, parts=parts)
 
     light = write_tags and not refine_positions  # the refinement reads every moving tag's matrix and estimates
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
@@ -454,28 +464,6 @@ def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
         return None, {}
     return bottom, {"source": "bottom_depth", "rule": "the deepest bottom_depth of the deployments that heard the tag",
                     "per_tag_m": {}}
-
-
-def combined_tracks(outcomes: dict[str, Any], matrices: dict[str, Any]) -> pd.DataFrame:
-    """``tracks.csv``: each tracked tag's track rows (its folder's ``track.csv``) with its tag, in
-    :data:`TRACK_COLUMNS`' order (``z``, ``sigma_z`` where the geometry is 3-D; ``lat``, ``lon`` NaN without a
-    frame), by tag and time."""
-    parts = []
-    for folder, outcome in outcomes.items():
-        t = outcome.track.copy()
-        t.insert(0, "tag", matrices[folder].summary["tag"])
-        for key in ("lat", "lon", "epoch_s", "time_utc"):
-            if key not in t:
-                t[key] = np.nan if key != "time_utc" else ""
-        parts.append(t)
-    if not parts:
-        return pd.DataFrame(columns=list(TRACK_COLUMNS))
-    tracks = pd.concat(parts, ignore_index=True)
-    columns = list(TRACK_COLUMNS)
-    if "z" in tracks:
-        columns[columns.index("y") + 1:columns.index("y") + 1] = ["z"]
-        columns[columns.index("sigma_y") + 1:columns.index("sigma_y") + 1] = ["sigma_z"]
-    return tracks[columns].sort_values(["tag", "epoch_s"], kind="stable").reset_index(drop=True)
 
 
 def _summary(data: Detections, deployments: Deployments, tally: Tally, clocks: dict[str, Any],
