@@ -412,7 +412,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
             resume.taken.clear()
         # a tag's track only where it has a position: a tag the tracker positioned nowhere is a row saying why
-        outcomes = {f: r for f, r in results.items() if rows[by_folder[f]]["status"] == "tracked"}
+        # in the order asked, not the order the workers ended them in (tracks.geojson's receivers name their tags so)
+        outcomes = {f: results[f] for f, *_ in jobs if f in results and rows[by_folder[f]]["status"] == "tracked"}
         table_tags = pd.DataFrame([rows[n] for n, _ in asked], columns=list(TAG_COLUMNS))
         table_tags = table_tags.astype({c: "Int64" for c in COUNT_COLUMNS})  # counts as counts, empty where none
         tracks = combined_tracks(outcomes, matrices) if parts is None else None

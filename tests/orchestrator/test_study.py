@@ -164,6 +164,22 @@ def test_a_study_written_to_a_folder_keeps_each_tags_track_alone_and_writes_its_
 
 
 @pytest.mark.slow
+def test_the_command_writes_the_tracks_a_tag_at_a_time_as_the_table_returned(study):
+    """``sblsim track`` keeps no tag's track and writes ``tracks.csv``, ``tracks.geojson`` and the map from the tags'
+    own files (orchestrator/telemetry/study_tracks.py): the same bytes as ``sblsim.track`` writes from the table it
+    returns, and that table's rows; with 2 workers as with 1 (the receivers' tags in the order asked, not the order
+    the workers ended them in)."""
+    from sblsim.orchestrator.cli import main
+
+    _, files, result, folder = study
+    assert main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
+                 str(files["tags"]), "--out", str(folder / "command"), "--workers", "2"]) == 0
+    for name in ("tracks.csv", "tracks.geojson", "map.png"):
+        assert (folder / "command" / name).read_bytes() == (folder / "out" / name).read_bytes(), name
+    assert (folder / "out" / "tracks.csv").read_text() == result.tracks.to_csv(index=False)
+
+
+@pytest.mark.slow
 def test_a_tag_never_detected_is_a_row_saying_so(study):
     _, files, _, _ = study
     result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"],
