@@ -398,13 +398,12 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
             if ended is not None:
                 ended(rows[name])
+            if parts is not None and not isinstance(result, str) and rows[name]["status"] == "tracked":
+                parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
             if light and not isinstance(result, str) and specs[name].role != "reference":
                 light_outcome = written_light(result, workdir / folder)  # its files now, its track alone kept
-                if parts is None or rows[name]["status"] != "tracked":
-                    return light_outcome
-                parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
-                return replace(light_outcome, track=None)
-            return None
+                return light_outcome if parts is None else replace(light_outcome, track=None)
+            return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
 
         kept = 0 if resume is None else resume.kept
         results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}

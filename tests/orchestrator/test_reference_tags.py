@@ -99,6 +99,21 @@ def test_each_reference_tag_is_scored_against_its_known_position(study):
 
 
 @pytest.mark.slow
+def test_written_a_tag_at_a_time_the_reference_tags_rows_are_in_the_tracks(study, tmp_path):
+    """A study that keeps no tag's track (``sblsim track``: tracks.csv from the tags' own files) keeps its reference
+    tags whole for their scoring and writes their rows too: its files are the study's kept whole."""
+    sim, refs, _, out = study
+    files = {name: out.parent / "in" / f"{name}.csv" for name in ("detections", "deployments", "tags")}
+    outcome = run_study(files["detections"], files["deployments"], files["tags"], workdir=tmp_path, chosen=refs,
+                        workers=1, write_tags=True, keep_tracks=False)
+    assert outcome.tracks is None and outcome.parts is not None
+    write_study(outcome, tmp_path)
+    assert set(_read(tmp_path, "tracks.csv")["tag"]) >= set(refs[:2])
+    for name in ("tracks.csv", "reference_tags.csv", "tracks.geojson"):
+        assert (tmp_path / name).read_text() == (out / name).read_text(), name
+
+
+@pytest.mark.slow
 def test_the_pooled_figures_and_the_console_line(study):
     sim, refs, outcome, out = study
     scored = _read(out, "reference_tags.csv")
