@@ -51,10 +51,11 @@ def test_hostile_cells_refused_in_one_line(tmp_path, cell, word):
     assert "\n" not in message and word in message and "line 2" in message and "[0, 1e+10]" in message
 
 
-def test_large_and_device_files_refused(tmp_path):
+def test_large_and_device_files_refused(tmp_path, monkeypatch):
     big = tmp_path / "big.txt"
-    big.write_bytes(b"0.1 0.2\n" * 1_000_000)
-    with pytest.raises(ModelError, match="allowed at most"):
+    big.write_bytes(b"0.1 0.2\n" * 2_000)
+    monkeypatch.setattr("sblsim.orchestrator.readers.toa_matrix.MAX_MATRIX_PINGS", 1_000)  # (read in pieces: 4 M)
+    with pytest.raises(ModelError, match="holds more than 1,000 pings; allowed at most 1,000"):
         read_toa(big)
     link = tmp_path / "zero.txt"
     os.symlink("/dev/zero", link)
