@@ -135,12 +135,16 @@ def read_table(folder: Path, label: str, key: str, within: str = "") -> pd.DataF
         One line: the file larger than :data:`MAX_TABLE_BYTES` or :data:`MAX_ROWS` rows, not CSV text, without a
         column it must have, or a number cell that is not a number.
     """
-    name, needed, numeric = TABLES[key]
-    name = f"{within}/{name}" if within else name
+    path, shown = _located(folder, label, key, within)
+    return None if path is None else _table(path, shown, *TABLES[key][1:])
+
+
+def _located(folder: Path, label: str, key: str, within: str) -> tuple[Path | None, str]:
+    """One of :data:`TABLES`' file in the folder (``within``: a sub-folder; None where it is not there) and its name
+    as refusals show it."""
+    name = f"{within}/{TABLES[key][0]}" if within else TABLES[key][0]
     path = _path(folder, name, label)
-    if not path.is_file():
-        return None
-    return _table(path, _shown(label, name), needed, numeric)
+    return (path if path.is_file() else None), _shown(label, name)
 
 
 def _table(path: Path, shown: str, needed: tuple[str, ...], numeric: tuple[str, ...] | None,
@@ -186,12 +190,10 @@ def read_pieces(folder: Path, label: str, key: str, kept: tuple[str, ...], text:
         One line: more than :data:`MAX_TRACK_ROWS` rows, a line too long or too wide, not UTF-8 CSV text, without a
         column it must have, or a number cell that is not a number.
     """
-    name, needed, _ = TABLES[key]
-    name = f"{within}/{name}" if within else name
-    path = _path(folder, name, label)
-    if not path.is_file():
+    path, shown = _located(folder, label, key, within)
+    if path is None:
         return None
-    shown, what = _shown(label, name), "report"
+    needed, what = TABLES[key][1], "report"
     head, rows, parts = None, 0, []
     for lines in line_chunks(path, what):
         while head is None and lines:  # its first line that is not blank, checked before any row is parsed
