@@ -87,6 +87,9 @@ def row_pieces(path: Path, what: str, max_cells: int | None = None) -> Iterator[
         kept = [(k, line) for k, line in lines if line.strip() and not line.lstrip().startswith("#")]
         if kept and delimiter is None:
             delimiter = "," if "," in kept[0][1] else " "
+        if total > max_cells:  # the rest counted, not parsed (a quoted separator counted as one)
+            total += sum(line.count(",") + 1 if delimiter == "," else len(line.split()) for _, line in kept)
+            continue
         rows = csv_cells(kept, f"{what}: {str(path)!r}", delimiter or " ")
         total += sum(len(cells) for _, cells in rows)
         if total <= max_cells:

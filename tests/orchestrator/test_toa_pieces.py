@@ -88,6 +88,10 @@ def test_the_pings_and_the_cells_are_its_only_bounds(tmp_path, monkeypatch):
     with pytest.raises(ModelError) as caught:
         read_toa(tmp_path / "toa.txt")
     assert str(caught.value).endswith(f"holds {3 * 121:,} cells; allowed at most {3 * 120:,} cells in a table")
+    monkeypatch.setattr(input_rows, "MAX_MATRIX_CELLS", 40)  # exceeded in the first piece: the rest counted
+    with pytest.raises(ModelError) as caught:
+        read_toa(tmp_path / "toa.txt")
+    assert str(caught.value).endswith(f"holds {3 * 121:,} cells; allowed at most 40 cells in a table")
 
 
 @pytest.mark.slow
