@@ -58,7 +58,17 @@ def _lines(path: Path, what: str) -> list[tuple[int, str]]:
     comments (``#``) and blank lines dropped, the others with their line numbers from 1."""
     lines = read_lines(path, what, max_bytes=MAX_TOA_BYTES, max_rows=MAX_PINGS, extra_lines=1000, refuse=_too_large,
                        delimiter="auto", max_line_cells=MAX_ROW_CELLS, max_cells=MAX_TOA_CELLS, comments=True)
-    return [(k, line) for k, line in enumerate(lines, start=1) if line.strip() and not line.lstrip().startswith("#")]
+    return _data_lines(enumerate(lines, start=1))
+
+
+def _data_lines(numbered) -> list[tuple[int, str]]:
+    """The numbered lines that hold a row: comments (``#``) and blank lines dropped."""
+    return [(k, line) for k, line in numbered if line.strip() and not line.lstrip().startswith("#")]
+
+
+def _delimiter(lines: list[tuple[int, str]]) -> str:
+    """A table's delimiter: ``","`` where its first row holds a comma, else ``" "`` (whitespace-separated)."""
+    return "," if lines and "," in lines[0][1] else " "
 
 
 def _rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
@@ -66,8 +76,7 @@ def _rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
     first row holds a comma, else whitespace-separated; quotes honoured (``"H1, north"`` is one cell). The cells
     keep trailing spaces (:func:`_stripped`, :func:`_numbers` strip them)."""
     lines = _lines(path, what)
-    delimiter = "," if lines and "," in lines[0][1] else " "
-    return csv_cells(lines, f"{what}: {str(path)!r}", delimiter)
+    return csv_cells(lines, f"{what}: {str(path)!r}", _delimiter(lines))
 
 
 def row_pieces(path: Path, what: str, max_cells: int | None = None) -> Iterator[list[tuple[int, list[str]]]]:
@@ -84,9 +93,9 @@ def row_pieces(path: Path, what: str, max_cells: int | None = None) -> Iterator[
     max_cells = MAX_MATRIX_CELLS if max_cells is None else max_cells
     delimiter, total = None, 0
     for lines in line_chunks(path, what, delimiter="auto", comments=True, max_line_cells=MAX_ROW_CELLS):
-        kept = [(k, line) for k, line in lines if line.strip() and not line.lstrip().startswith("#")]
+        kept = _data_lines(lines)
         if kept and delimiter is None:
-            delimiter = "," if "," in kept[0][1] else " "
+            delimiter = _delimiter(kept)
         if total > max_cells:  # the rest counted, not parsed (a quoted separator counted as one)
             total += sum(line.count(",") + 1 if delimiter == "," else len(line.split()) for _, line in kept)
             continue

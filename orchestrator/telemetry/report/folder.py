@@ -147,16 +147,21 @@ def _located(folder: Path, label: str, key: str, within: str) -> tuple[Path | No
     return (path if path.is_file() else None), _shown(label, name)
 
 
+def _check_columns(header: list[str], needed: tuple[str, ...], shown: str, what: str) -> None:
+    """Refuse a table without one of the ``needed`` columns, in one line naming them."""
+    missing = [c for c in needed if c not in header]
+    if missing:
+        raise ModelError(f"{what}: {shown!r} has no column {', '.join(missing)}; allowed: the table as sblsim track "
+                         "writes it")
+
+
 def _table(path: Path, shown: str, needed: tuple[str, ...], numeric: tuple[str, ...] | None,
            text: tuple[str, ...] = ()) -> pd.DataFrame:
     """A CSV of the folder: text cells, ``numeric``'s columns as numbers (None: each column of numbers and empty
     cells only, but those of ``text``)."""
     what = "report"
     header, body, lines = text_table(read_text(path, what, MAX_TABLE_BYTES, MAX_ROWS), shown, what, MAX_ROWS)
-    missing = [c for c in needed if c not in header]
-    if missing:
-        raise ModelError(f"{what}: {shown!r} has no column {', '.join(missing)}; allowed: the table as sblsim track "
-                         "writes it")
+    _check_columns(header, needed, shown, what)
     out = {}
     for k, name in enumerate(header):
         cells = body[k] if k in body else pd.Series([""] * len(body), dtype=str)
@@ -198,10 +203,8 @@ def read_pieces(folder: Path, label: str, key: str, kept: tuple[str, ...], text:
     for lines in line_chunks(path, what):
         while head is None and lines:  # its first line that is not blank, checked before any row is parsed
             head, lines = (lines[0][1] if lines[0][1].strip() else None), lines[1:]
-            missing = [] if head is None else [c for c in needed if c not in text_table(head, shown, what, 0)[0]]
-            if missing:
-                raise ModelError(f"{what}: {shown!r} has no column {', '.join(missing)}; allowed: the table as "
-                                 "sblsim track writes it")
+            if head is not None:
+                _check_columns(text_table(head, shown, what, 0)[0], needed, shown, what)
         if not lines:
             continue
         header, body, where = text_table("\n".join([head, *(line for _, line in lines)]), shown, what, MAX_TRACK_ROWS,
