@@ -73,7 +73,7 @@ def read_toa(path: Path | str) -> ToaMatrix:
                              f"{MAX_MATRIX_PINGS:,} (split it in time)")
         depth = names is not None and DEPTH_COLUMN in names
         parts.append((_numbers(rows, str(path), what, header, -MAX_TIME if depth else 0.0, MAX_TIME, True,
-                               names is not None), np.array([k for k, _ in rows], np.int64)))
+                               names is not None), [k for k, _ in rows] if depth else []))  # lines: the depth's checks
     if header is None:
         raise ModelError(f"{what}: {str(path)!r} holds no rows; allowed: a matrix of times of arrival [s]")
     if not parts:
@@ -81,7 +81,7 @@ def read_toa(path: Path | str) -> ToaMatrix:
     values = parts[0][0] if len(parts) == 1 else np.concatenate([v for v, _ in parts])
     if names is None or DEPTH_COLUMN not in names:
         return ToaMatrix(values, names)
-    lines = np.concatenate([k for _, k in parts])
+    lines = [k for _, numbers in parts for k in numbers]
     at = names.index(DEPTH_COLUMN)
     depth, toa = values[:, at], np.delete(values, at, axis=1)
     receivers = [n for n in names if n != DEPTH_COLUMN]

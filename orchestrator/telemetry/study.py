@@ -119,7 +119,7 @@ class StudyOutcome:
         ``tracks.csv`` a tag at a time from the tags' own files (``keep_tracks`` False: the outcomes hold no track).
     """
 
-    tracks: pd.DataFrame
+    tracks: pd.DataFrame | None
     tags: pd.DataFrame
     deployments: Deployments
     summary: dict[str, Any]
