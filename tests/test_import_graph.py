@@ -175,6 +175,7 @@ def _layer(module: str) -> str:
     return ".".join(module.split(".")[:2])
 
 
+@pytest.mark.slow
 def test_the_graph_is_read():
     """The reader finds the package's modules and known arrows, function-level ones included."""
     assert len(MODULES) > 60

@@ -317,6 +317,7 @@ def usbl_case(seed=4, n=200, b=3):
     return truth, slot, received, transceivers, attitudes, fixed
 
 
+@pytest.mark.slow
 def test_usbl_pcrb_equals_a_kalman_filter_covariance_with_range_and_direction_cosines():
     """The USBL bound (models/systems/usbl_bound.py pcrb) against FilterPy's KalmanFilter covariance of the augmented
     state (the third run's GPS error and attitude error as states) with the linearized range and direction-cosine rows

@@ -94,6 +94,7 @@ def test_the_family_table_holds_the_exact_solve(name, depth, bounds, share):
                                    want[k][:, ~answered][exists[:, ~answered]], rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_family_table_is_the_image_paths_in_isovelocity_water():
     """In water of one speed every family is its isovelocity image: the straight line and its images in the surface
     and the bottom, spherical spreading and the image's length, so the table answers everywhere."""

@@ -169,6 +169,7 @@ def _random_interval_track(seed: int = 5):
     return toa, s, schedule, tt.robust_track(toa, RECEIVERS, s, (fx, fe, fu), None, schedule, modes=False)
 
 
+@pytest.mark.slow
 def test_a_search_of_some_pings_keeps_the_others_share():
     """The spread split by the hypotheses' ping: the pings searched in two halves, the second keeping the first's
     share, sum to the whole search's spread (to 1e-6 of it: the windows solved together hardly couple); after a

@@ -77,6 +77,7 @@ def test_a_faster_layer_between_the_ends_casts_a_shadow():
     assert float(out[3]) == 0
 
 
+@pytest.mark.slow
 def test_the_layers_a_ray_does_not_cross_change_no_sum():
     """The solve's layer sums (range, time, dX/dq; the tube's range over √(1 − q²), its derivative, the arc
     length), which skip the layers a ray does not cross, equal bit for bit the sums of every layer's terms (each

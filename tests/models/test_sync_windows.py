@@ -143,6 +143,7 @@ def test_the_windows_of_a_season():
             season_windows(np.array([0.0, 30 * day]), WIDTH, window, overlap)
 
 
+@pytest.mark.slow
 def test_the_time_base_carried_past_the_reference_receivers_recovery():
     """Receiver 0 (the reference) and its sync tag recovered at day 5 of 10, windows of 3 days: the last window,
     which it never hears, fitted against another receiver and carried onto receiver 0's time base. What the arrivals

@@ -191,6 +191,7 @@ def test_the_speed_terms_are_the_estimates_sensitivity_to_the_speed():
     assert abs(np.sqrt(ours.sum() / theirs.sum()) - 1.0) <= 0.1, np.sqrt(ours.sum() / theirs.sum())
 
 
+@pytest.mark.slow
 def test_the_fixes_and_the_track_hold_the_sound_speed_error():
     """A speed 10 m/s uncertain (each run solved at 1,480 + 10 N(0, 1) m/s, the pings simulated at 1,480 m/s, among
     receivers 200 m apart): the fixes' 2-D NEES (30 runs) and the robust smoother's (12) in [1.5, 4.5] with the speed's

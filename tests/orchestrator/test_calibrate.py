@@ -215,6 +215,7 @@ def test_a_bad_line_of_a_xie_file_is_refused(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_named_keys_and_its_log_reads_back(tmp_path, survey_a):
     assert main(["calibrate", "xie-2021-07-23", "--out", str(tmp_path / "a")]) == 0
     s = json.loads((tmp_path / "a" / "solution.json").read_text())

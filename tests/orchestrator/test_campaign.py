@@ -238,6 +238,7 @@ def test_ctrl_c_exits_130_and_resume_gives_the_uninterrupted_result(kill_referen
     assert_same_runs(read_runs(out), kill_reference)
 
 
+@pytest.mark.slow
 def test_sigterm_keeps_the_work_and_says_how_to_finish(kill_reference, tmp_path):
     proc, out, _, stderr = _start_and_stop_part_way(tmp_path, signal.SIGTERM)
     assert proc.returncode == 128 + signal.SIGTERM, stderr

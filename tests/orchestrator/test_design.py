@@ -627,6 +627,7 @@ def test_every_effort_key_at_its_maximum_is_refused_with_its_estimate_before_any
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_the_estimate_bounds_the_search_and_the_progress_counts_its_layouts():
     """The estimate's layouts bound what the search evaluates (every candidate searched: the Pareto front), the
     progress reports the layouts against that bound, and a bound below the estimate refuses the problem."""

@@ -166,6 +166,7 @@ def test_the_ilbl_design_s_information_is_an_independent_fisher_computation_with
         assert best.drms_expected[j] == pytest.approx(np.sqrt(cov[0, 0] + cov[1, 1]), rel=1e-9)
 
 
+@pytest.mark.slow
 def test_every_pair_of_an_lbl_design_s_transponders_is_within_the_footprint():
     """A footprint of 80 m (four transponders free in a 60 m circle spread wider): every layout searched that does
     not fail for its footprint has every pair within it (pdist), the proposed one included; the same layout judged

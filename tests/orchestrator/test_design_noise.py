@@ -148,6 +148,7 @@ def test_the_simulated_pings_carry_the_law():
     assert tm.range_noise(toa, d, 0.15, 0.0, 1500.0, rng) is toa and rng.bit_generator.state == state
 
 
+@pytest.mark.slow
 def test_the_ilbl_confirmation_with_the_law_agrees_with_the_prediction():
     """A tag at the middle of a ring of six receivers, σ growing 4 mm per metre (σ₀ 0.148 m, 0.548 m at 100 m):
     1,000 simulated pings carrying the law, fixed by weighted least squares, give the predicted DRMS within 10 %,

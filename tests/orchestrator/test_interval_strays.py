@@ -51,6 +51,7 @@ def _replay(folder: Path, out: Path, interval: str, *extra: str) -> int:
                  *extra])
 
 
+@pytest.mark.slow
 def test_stray_rows_are_set_aside_listed_and_kept_in_the_track_with_their_reason(tmp_path, capsys, record):
     folder, matrix, inserted = record
     assert _replay(folder, tmp_path / "out", "20:40", "--smooth") == 0

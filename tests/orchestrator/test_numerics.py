@@ -66,6 +66,7 @@ def test_a_planted_divergence_is_flagged(tmp_path, capsys):
     assert summary["diverged"] is False
 
 
+@pytest.mark.slow
 def test_summary_json_is_strict_json(tmp_path):
     """A metric without a value (lsq at T = 1 s with every packet lost: no fix) is null, not NaN."""
     out = tmp_path / "run"

@@ -40,6 +40,7 @@ SITE = ["simulation.receiver=ekf-seq", "platform.system=lbl", "platform.seafloor
         "acoustics.propagation=ray", "acoustics.sound_speed_profile=munk"]
 
 
+@pytest.mark.slow
 def test_the_conversion_inverts_a_linear_gradients_closed_form():
     c0, g = 1480.0, 0.05  # [m/s], [1/s]: c = c0 + g z
     nodes, speeds = profile_arrays([[0.0, c0], [5000.0, c0 + g * 5000.0]])

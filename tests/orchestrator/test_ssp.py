@@ -167,6 +167,7 @@ def test_read_back_gives_the_same_configuration_and_connections(exported):
     assert again.config["simulation"]["master"] == "jacobi" and again.config["run"]["seed"] == 9
 
 
+@pytest.mark.slow
 def test_run_ssp_on_the_local_engine_equals_run_of_the_scenario(exported, tmp_path, capsys):
     cfg, path = exported
     assert main(["run", "--ssp", str(path), "--engine", "local", "--out", str(tmp_path / "r")]) == 0

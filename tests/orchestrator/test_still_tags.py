@@ -65,6 +65,7 @@ def test_still_tags_in_changing_water_are_not_flagged_and_their_sigma_is_honest(
     assert flagged <= 0.05 * rows and 1.0 <= np.mean(nees) <= 3.0, (flagged, rows, np.mean(nees), nees)
 
 
+@pytest.mark.slow
 def test_a_tag_moved_20_m_half_way_is_flagged_from_its_move(tmp_path, capsys):
     """A still tag dragged 20 m east at its 360th ping: ``sblsim replay --motion stationary`` flags its rows from
     within 3 pings of the move (``tag_moved``), the rows before it ``ok``; the summary's second place is within 1 m of

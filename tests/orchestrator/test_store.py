@@ -304,6 +304,7 @@ def test_sync_of_a_store_reads_its_sync_tags_alone_and_fits_the_clocks_of_its_fi
     assert np.allclose(a["offset_start_s"], b["offset_start_s"], rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_toa_of_a_store_reads_its_tag_alone_and_builds_its_files_matrix(tmp_path, monkeypatch):
     """``sblsim toa`` on a store asks it for the tag's rows alone and builds the matrix it builds from the file (the
     same pings, receivers and times); a tag the store never holds refused in one line naming the store's tags."""

@@ -180,6 +180,7 @@ def test_the_function_checks_its_arguments(tmp_path):
                     sound_speed_file=BOATS / "sound_speed.csv")
 
 
+@pytest.mark.slow
 def test_a_small_array_s_outputs_are_written_and_read_back(tmp_path):
     """6 receivers over 3 hours (the fast tier's run of the outputs): every file written, offsets.csv and sync.json
     what the result holds, and the offsets within 3 of their sigmas of the simulated clocks."""
@@ -334,6 +335,7 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     assert 0.5 <= np.mean(places) <= 4.5, places
 
 
+@pytest.mark.slow
 def test_whole_second_times_are_refused_in_one_line_and_milliseconds_synchronised(tmp_path, capsys):
     """A small simulated array (6 receivers, 3 h) exported with whole seconds: ``sync`` refuses it in one line
     naming the file and the rounding (1 s) as the cause, exit status 2 (tests/orchestrator/test_sync_whole_seconds.py

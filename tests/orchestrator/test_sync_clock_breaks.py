@@ -134,6 +134,7 @@ def test_segments_that_overlap_are_refused_in_one_line(tmp_path):
                                                      ).tolist() == [0, -1, 1]
 
 
+@pytest.mark.slow
 def test_a_jump_near_the_records_end_said_in_one_line_and_set_aside(tmp_path, capsys):
     """R2's clock goes back 20 s with 5 of its sync-tag arrivals after it (too few to fit a segment): one warning
     line names R2, says it went back 20 s, the 5 arrivals and that its times from there are set aside; those 5

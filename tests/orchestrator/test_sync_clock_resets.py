@@ -153,6 +153,7 @@ def _plain(folder: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_time_logged_after_a_reset_is_corrected_in_its_clock_part(tmp_path):
     """``SyncResult.correct(receiver, times, part)``: R2's readings of T1's arrivals an hour after its −20 s reset,
     corrected in clock part 2, are the true arrivals on R0's clock (the simulation's) within three times the timing

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.orchestrator.cli import main
@@ -14,6 +15,7 @@ from sblsim.orchestrator.sync.run import SyncOutcome, _kept
 EPOCH = 1_700_000_000
 
 
+@pytest.mark.slow
 def test_a_sparse_sync_array_refinement_is_refused(tmp_path, capsys):
     """8 simulated receivers, 3 of them with a sync tag: --refine-positions refused in one line naming the 3 sync
     tags and what is needed, exit 2, no output folder; without it the same files synchronise."""

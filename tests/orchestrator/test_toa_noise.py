@@ -60,6 +60,7 @@ def test_the_sync_measures_each_receivers_noise(synchronised):
     assert 8 < measured[serials[3]] / quiet < 12
 
 
+@pytest.mark.slow
 def test_the_matrix_carries_it_and_the_tracker_takes_it(synchronised, tmp_path, capsys):
     """The matrix's ``receivers.csv`` holds each receiver's ``toa_sigma_s`` as the synchronisation measured it, the
     replay takes it per receiver (``summary["toa_noise"]``) and says so in one line; ``--toa-sigma`` given is taken
@@ -82,6 +83,7 @@ def test_the_matrix_carries_it_and_the_tracker_takes_it(synchronised, tmp_path, 
     assert given.summary["toa_noise"] == {"source": "given", "sigma_s": 3e-4}
 
 
+@pytest.mark.slow
 def test_an_old_sync_folder_without_the_column_still_reads(synchronised, tmp_path, capsys):
     """A synchronisation written before ``toa_sigma_s`` (the column taken out) reads to the same clocks, its matrix
     has no ``toa_sigma_s`` and the replay takes the default 0.15 ms, said in one line."""

@@ -56,6 +56,7 @@ def test_the_depth_column_and_the_survey_errors_read_as_pandas_reads_them(tmp_pa
     assert np.allclose(read_receivers(toml).sigma, [0.2, np.nan], equal_nan=True)
 
 
+@pytest.mark.slow
 def test_a_tag_with_depth_readings_and_surveyed_receivers_is_tracked_at_its_depth(tmp_path):
     """The replay takes the readings (the track's height within 0.4 m RMS of the truth: the readings' own 0.3 m,
     smoothed) and the survey errors (their share of every estimator's sigma: larger than without them)."""

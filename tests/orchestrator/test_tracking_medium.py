@@ -172,6 +172,7 @@ def test_a_stationary_tag_is_one_position_within_its_covariance(tmp_path):
     assert not motion["moved"] and motion["moved_test"]["trusted_fixes"] >= 100, motion
 
 
+@pytest.mark.slow
 def test_a_moving_tag_tracked_as_stationary_is_said_and_flagged(tmp_path, capsys):
     """A tag moving at 0.3 m/s through the array tracked with --motion stationary: its trusted fixes lie in order in
     time (the summary's ratio recomputed here from the fixes of four receivers or more: the median distance of

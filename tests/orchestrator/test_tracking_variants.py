@@ -235,6 +235,7 @@ RECEIVERS = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [1
                       [140.0, 20.0], [30.0, 80.0]])
 
 
+@pytest.mark.slow
 def test_the_calibration_is_the_median_of_its_stretches_and_its_sigma_their_spread():
     """Simulated pings at 1,480 m/s: the speed within 3 standard errors; one stretch's arrivals all made late by 2 ms
     at half of the receivers (a wrong speed there) moves the median by less than it moves the one joint fit."""

@@ -254,7 +254,7 @@ def test_straight_below_with_the_array_s_noise_alone_and_at_a_deep_site():
     assert rms == pytest.approx(drms, rel=0.10), (rms, drms)
 
 
-@pytest.mark.parametrize("gps", [1.0, 0.1])
+@pytest.mark.parametrize("gps", [pytest.param(1.0, marks=pytest.mark.slow), 0.1])
 def test_the_usbl_map_is_finite_everywhere_and_never_beats_the_gps_error(gps, tmp_path, capsys):
     """``sblsim map`` of a USBL configuration over a grid through the point straight below the transceiver: every
     value finite (``map.csv`` has no ``inf``), at least √2 σ_GPS (the GPS error alone, per axis, gives that
