@@ -22,7 +22,7 @@ import numpy as np
 from sblsim.models.receiver.toa_bound import predict, process_noise
 from sblsim.models.tracking.fix import GATE_ONE, Fix, single_ping_fix
 from sblsim.models.tracking.schedule import PingSchedule
-from sblsim.models.tracking.toa import checked_sigma, per_receiver, toa_function
+from sblsim.models.tracking.toa import PingModel, checked_sigma, per_receiver
 
 
 @dataclass
@@ -184,7 +184,8 @@ class ToaTracker:
         self.n, self.dim = self.receivers.shape
         self.settings = settings
         self.size = 2 * self.dim + 2
-        self._f = toa_function(self.n, self.dim)
+        self._model = PingModel(self.receivers, settings.sound_speed)  # the TOA model and its Jacobian
+        self._eye = np.eye(self.size)
         self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
         from scipy.stats import chi2
 
@@ -222,9 +223,8 @@ class ToaTracker:
         """The EKF update with one ping's times of arrival (n,) (NaN: not heard), gated (:meth:`_gated`, ``kept``
         (n,) the arrivals the ping's single-ping fix keeps, if known); returns the state, the covariance (Joseph
         form) and the arrivals used (n,)."""
-        d, s = self.dim, self.settings
-        model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
-        model, J = np.asarray(model).ravel(), np.asarray(J)
+        d = self.dim
+        model, J = self._model(x[:d], x[-2])
         H = np.zeros((self.n, self.size))
         H[:, :d] = J[:, :d]
         H[:, -2] = J[:, d]
@@ -234,14 +234,15 @@ class ToaTracker:
         W = self._consider_spread(model, x[-2])
 
         def S(used):
-            return H[used] @ P @ H[used].T + self._noise(used) + W[np.ix_(used, used)]
+            Hu = H[used]
+            return Hu @ P @ Hu.T + self._noise(used) + W[used][:, used]
 
         used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R + np.diag(W), S, kept)
         if Su is not None:
             Hu = H[used]
-            K = np.linalg.solve(Su - W[np.ix_(used, used)], Hu @ P).T
+            K = np.linalg.solve(Su - W[used][:, used], Hu @ P).T
             x = x + K @ nu[used]
-            A = np.eye(self.size) - K @ Hu
+            A = self._eye - K @ Hu
             P = A @ P @ A.T + self._gain_noise(K, used)
             P = 0.5 * (P + P.T)
         return x, P, used

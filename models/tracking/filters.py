@@ -41,8 +41,7 @@ class ToaSeqTracker(ToaTracker):
         :meth:`ToaTracker.update`'s); returns the state, the covariance (Joseph form) and the arrivals used (n,)."""
         d, s = self.dim, self.settings
         R = self._R  # [s²]: one, or each receiver's (n,)
-        model, J = self._f(x[:d], x[-2], self.receivers.T, s.sound_speed)
-        model, J = np.asarray(model).ravel(), np.asarray(J)
+        model, J = self._model(x[:d], x[-2])
         H = np.zeros((self.n, self.size))
         H[:, :d], H[:, -2] = J[:, :d], J[:, d]
         heard = np.isfinite(toa)

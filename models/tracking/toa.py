@@ -80,6 +80,43 @@ def toa_model(position: np.ndarray, emission: float, receivers: np.ndarray, c: f
     return np.asarray(toa).ravel(), np.asarray(J)
 
 
+class PingModel:
+    """:func:`toa_function` of one array at one sound speed, evaluated one ping at a time through casadi's buffer
+    API (``Function.buffer``: the arguments and results numpy arrays bound once, no conversion per call; a filter's
+    update calls it every ping). The same function, so the same numbers to the last bit as calling it.
+
+    Parameters
+    ----------
+    receivers : ndarray, (n, dim)
+        Receiver positions [m].
+    c : float
+        Sound speed [m/s].
+    """
+
+    def __init__(self, receivers: np.ndarray, c: float) -> None:
+        n, dim = np.shape(receivers)
+        function = toa_function(n, dim)
+        # casadi reads and writes the buffers in column-major order: R (dim, n) is receivers (n, dim) in C order,
+        # and the Jacobian (n, dim + 1) is written as its transpose (dim + 1, n) in C order
+        self._position, self._emission = np.zeros(dim), np.zeros(1)
+        self._receivers = np.array(receivers, float, order="C")
+        self._c = np.array([float(c)])
+        self._toa, self._jacobian = np.zeros(n), np.zeros((dim + 1, n))
+        self._buffer, self._evaluate = function.buffer()
+        for k, argument in enumerate((self._position, self._emission, self._receivers, self._c)):
+            self._buffer.set_arg(k, memoryview(argument))
+        self._buffer.set_res(0, memoryview(self._toa))
+        self._buffer.set_res(1, memoryview(self._jacobian))
+
+    def __call__(self, position: np.ndarray, emission: float) -> tuple[np.ndarray, np.ndarray]:
+        """The times of arrival (n,) [s] and their Jacobian (n, dim + 1) [s/m, 1] of a ping emitted at ``position``
+        (dim,) [m] at ``emission`` [s] (:func:`toa_model`'s, new arrays each call)."""
+        self._position[:] = position
+        self._emission[0] = emission
+        self._evaluate()
+        return self._toa.copy(), self._jacobian.T.copy()
+
+
 def _ranges(d: np.ndarray, c: float, single: bool) -> tuple[np.ndarray, np.ndarray]:
     """The travel times ``‖d‖ / c`` [s] (...) of the offsets ``d`` (..., dim) [m] from the receivers to the target,
     and their derivatives ``d / (c ‖d‖)`` [s/m] (..., dim), by the operations of :func:`toa_function`'s own
@@ -136,4 +173,5 @@ def reference_sigma(sigma_toa: float | np.ndarray) -> float:
     return sigma_toa if np.ndim(sigma_toa) == 0 else float(np.median(sigma_toa))
 
 
-__all__ = ["SOUND_SPEED_RANGE", "checked_sigma", "per_receiver", "reference_sigma", "toa_function", "toa_model"]
+__all__ = ["PingModel", "SOUND_SPEED_RANGE", "checked_sigma", "per_receiver", "reference_sigma", "toa_function",
+           "toa_model"]
