@@ -17,7 +17,8 @@ the simulation's (no EM). Each stage's time (wall clock, and the process's CPU t
 a core whatever else runs) and the peak resident memory over the track (the process's high-water mark, reset
 before it where Linux allows, else since the start); the per-ping time against the smallest size's
 (1.00 for linear scaling); at the smallest size, the EKF with the RTS smoother on the same pings (a ping-by-ping
-loop) per ping beside it; and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
+loop) per ping beside it, with its baseline (the TOA model called per ping as before: :func:`casadi_called`);
+and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
 the EKF, the sequential EKF, the UKF, both smoothers, the quality marks, scoring) at ``--replay-pings``. A JSON
 line last.
 
@@ -173,8 +174,27 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
             "peak_reset": reset, "robust": robust}
 
 
-def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float) -> float:
-    """The EKF with the RTS smoother on the same pings, from the same fixes and schedule [s] (their time alone)."""
+def casadi_called(receivers: np.ndarray, sound_speed: float):
+    """The baseline of the EKF's TOA model: :func:`toa_function` called per ping with numpy arguments, casadi
+    converting them and its results each time (as the EKF did before
+    :class:`~sblsim.models.tracking.toa.PingModel`)."""
+    from sblsim.models.tracking.toa import toa_function
+
+    function, positions = toa_function(*receivers.shape), np.asarray(receivers, float).T
+
+    def model(position: np.ndarray, emission: float) -> tuple[np.ndarray, np.ndarray]:
+        toa, J = function(position, emission, positions, sound_speed)
+        return np.asarray(toa).ravel(), np.asarray(J)
+
+    return model
+
+
+def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float,
+            baseline: bool = True) -> dict:
+    """The EKF with the RTS smoother on the same pings, from the same fixes and schedule: its time alone [s]
+    (``ekf_rts_s``); with ``baseline``, the same with the TOA model called per ping as before
+    (:func:`casadi_called`, ``ekf_rts_baseline_s``) and whether the two give the same records and smoothed
+    track to the last bit (``ekf_rts_same``)."""
     from sblsim.models.receiver import toa_tracking as tt
     from sblsim.models.tracking.timing import SIGMA_TOA
     from sblsim.orchestrator.tracks.tracker import ping_schedule, tracker_settings
@@ -182,10 +202,23 @@ def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelera
     fx, fe, fc, fused, _ = tt.fix_pings(toa, receivers, sound_speed, SIGMA_TOA)
     settings = replace(tracker_settings(sound_speed, fe), acceleration_psd=acceleration_psd)
     schedule, _ = ping_schedule(toa, receivers, settings)
-    tracker = tt.ToaTracker(receivers, replace(settings, interval=schedule.interval))
-    start = time.perf_counter()
-    tracker.smooth(tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule))
-    return time.perf_counter() - start
+
+    def timed(called: bool) -> tuple[float, list[np.ndarray]]:
+        tracker = tt.ToaTracker(receivers, replace(settings, interval=schedule.interval))
+        if called:
+            tracker._model = casadi_called(receivers, sound_speed)
+        start = time.perf_counter()
+        record = tracker.run(toa, (fx, fc, fused.sum(axis=1)), fused, schedule)
+        smoothed = tracker.smooth(record)
+        return time.perf_counter() - start, [record.x_filtered, record.P_filtered, record.used, *smoothed]
+
+    seconds, today = timed(False)
+    out = {"ekf_rts_s": seconds}
+    if baseline:
+        seconds, before = timed(True)
+        out |= {"ekf_rts_baseline_s": seconds,
+                "ekf_rts_same": all(np.array_equal(a, b, equal_nan=True) for a, b in zip(today, before))}
+    return out
 
 
 def replay(n_pings: int, seed: int = 0) -> dict:
@@ -222,7 +255,7 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3, 
     counts = sorted({max(n_pings // 10**k, 100) for k in range(sizes)})
     small = simulate(counts[0], seed)
     track(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)  # loads the modules, untimed
-    ekf_s = ekf_rts(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)
+    ekf = ekf_rts(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd, baseline)
     runs, robust = [], None
 
     def summary(r, count, truth, arrivals):
@@ -255,11 +288,13 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3, 
            "schedule_s": last["schedule_s"], "robust_s": last["robust_s"], "peak_gib": last["peak_bytes"] / 1024**3,
            "target_s": TARGET_S, "target_gib": TARGET_BYTES / 1024**3,
            "per_ping_us": [run["per_ping_us"] for run in runs], "ratio": [run["ratio"] for run in runs],
-           "sizes": counts, "rms_m": last["rms_m"], "ekf_rts_per_ping_us": 1e6 * ekf_s / counts[0],
+           "sizes": counts, "rms_m": last["rms_m"], "ekf_rts_per_ping_us": 1e6 * ekf["ekf_rts_s"] / counts[0],
            "cores": os.cpu_count(), "runs": runs, "robust": robust}
     if baseline:
         out |= {"baseline_track_cpu_s": last["baseline"]["track_cpu_s"], "cpu_ratio": last["cpu_ratio"],
-                "moved_m": last["moved_m"], "moved_te_m": last["moved_te_m"]}
+                "moved_m": last["moved_m"], "moved_te_m": last["moved_te_m"],
+                "ekf_rts_baseline_per_ping_us": 1e6 * ekf["ekf_rts_baseline_s"] / counts[0],
+                "ekf_rts_ratio": ekf["ekf_rts_s"] / ekf["ekf_rts_baseline_s"], "ekf_rts_same": ekf["ekf_rts_same"]}
     if replay_pings:
         out |= {"replay_pings": replay_pings, **replay(replay_pings, seed)}
     return out
@@ -292,8 +327,11 @@ def main() -> None:
                   f"s (its splice rounds {base['splice_cpu_s']:.2f}), peak {base['peak_bytes'] / 1024**3:.2f} GiB, "
                   f"RMS error {base['rms_m']:.3f} m; today's CPU {run['cpu_ratio']:.2f}× its; the tracks apart by "
                   f"{run['moved_m']:.2g} m at most (emission times {run['moved_te_m']:.2g} m)")
-    print(f"the EKF with the RTS smoother at {r['sizes'][0]:,} pings: {r['ekf_rts_per_ping_us']:.1f} µs per ping; "
-          f"targets at 10⁶ pings: {r['target_s']:g} s of CPU and {r['target_gib']:g} GiB on one core")
+    print(f"the EKF with the RTS smoother at {r['sizes'][0]:,} pings: {r['ekf_rts_per_ping_us']:.1f} µs per ping"
+          + (f" (the baseline, the TOA model called per ping: {r['ekf_rts_baseline_per_ping_us']:.1f} µs; today's "
+             f"time {r['ekf_rts_ratio']:.2f}× its; the same records to the last bit: {r['ekf_rts_same']})"
+             if "ekf_rts_ratio" in r else "")
+          + f"; targets at 10⁶ pings: {r['target_s']:g} s of CPU and {r['target_gib']:g} GiB on one core")
     if "replay_s" in r:
         print(f"the whole replay (EM, EKF, sequential EKF, UKF, both smoothers, quality, scoring) of "
               f"{r['replay_pings']:,} pings: {r['replay_s']:.2f} s, RMS error {r['replay_rms_m']:.3f} m")

@@ -35,6 +35,9 @@ def test_the_robust_track_of_a_small_record_is_the_tag_s_and_its_times_add_up():
     assert r["ratio"][0] == 1.0 and np.isclose(r["ratio"][1], r["per_ping_us"][1] / r["per_ping_us"][0], rtol=1e-12)
     # the baseline in the same run (the splice rounds re-solving the whole record): its own CPU time, the ratio of
     # the two, and today's track within a micrometre of it on this record
+    # the EKF's baseline (its TOA model called per ping as before): the same records to the last bit, its time beside
+    assert r["ekf_rts_same"] is True and r["ekf_rts_baseline_per_ping_us"] > 0.0
+    assert np.isclose(r["ekf_rts_ratio"], r["ekf_rts_per_ping_us"] / r["ekf_rts_baseline_per_ping_us"], rtol=1e-9)
     for run in r["runs"]:
         base = run["baseline"]
         assert base["pings"] == run["pings"] and base["track_cpu_s"] > 0.0 and run["splice_cpu_s"] >= 0.0
