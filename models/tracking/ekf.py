@@ -431,12 +431,23 @@ def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.n
     """
     xs = np.array(x_filtered, float)
     Ps = np.array(P_filtered, float)
+    gains = rts_gains(P_filtered, P_predicted, F)
     for k in range(len(xs) - 2, -1, -1):
-        C = np.linalg.solve(P_predicted[k + 1], F[k + 1] @ P_filtered[k]).T
+        C = gains[k]
         xs[k] = x_filtered[k] + C @ (xs[k + 1] - x_predicted[k + 1])
         Ps[k] = P_filtered[k] + C @ (Ps[k + 1] - P_predicted[k + 1]) @ C.T
         Ps[k] = 0.5 * (Ps[k] + Ps[k].T)
     return xs, Ps
 
 
-__all__ = ["ToaTracker", "TrackRecord", "TrackerSettings", "rts_smooth"]
+
+def rts_gains(P_filtered: np.ndarray, P_predicted: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The RTS smoother's gains ``C_k = P_k|k F_{k+1}ᵀ P_{k+1|k}⁻¹`` (m − 1, s, s) of a filter's record (m rows, as
+    :func:`rts_smooth` takes them): they depend on the filter alone, so they are solved for every row at once (the
+    same LAPACK solve per row, the same numbers as one at a time)."""
+    if len(P_filtered) < 2:
+        return np.empty((0, *np.shape(P_filtered)[1:]))
+    return np.swapaxes(np.linalg.solve(P_predicted[1:], F[1:] @ P_filtered[:-1]), 1, 2)
+
+
+__all__ = ["ToaTracker", "TrackRecord", "TrackerSettings", "rts_gains", "rts_smooth"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sblsim.models.tracking.ekf import TrackRecord
+from sblsim.models.tracking.ekf import TrackRecord, rts_gains
 from sblsim.models.tracking.toa import _evaluate_pings, per_receiver
 
 
@@ -110,10 +110,9 @@ def smoothed_sensitivity(record: TrackRecord, sensitivity: np.ndarray) -> np.nda
     :func:`filter_sensitivity` (m, s, p); NaN before the start."""
     out = np.array(sensitivity, float)
     k0 = record.start
+    gains = rts_gains(record.P_filtered[k0:], record.P_predicted[k0:], record.F[k0:])
     for k in range(len(out) - 2, k0 - 1, -1):
-        F = record.F[k + 1]
-        C = np.linalg.solve(record.P_predicted[k + 1], F @ record.P_filtered[k]).T
-        out[k] = sensitivity[k] + C @ (out[k + 1] - F @ sensitivity[k])
+        out[k] = sensitivity[k] + gains[k - k0] @ (out[k + 1] - record.F[k + 1] @ sensitivity[k])
     return out
 
 
