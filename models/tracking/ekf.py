@@ -186,7 +186,9 @@ class ToaTracker:
         self.size = 2 * self.dim + 2
         self._model = PingModel(self.receivers, settings.sound_speed)  # the TOA model and its Jacobian
         self._eye = np.eye(self.size)
+        self._eyes = [np.eye(k) for k in range(self.n + 1)]  # the identities of 0 to n arrivals
         self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
+        self._per_receiver = per_receiver(self._R)
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
@@ -250,13 +252,13 @@ class ToaTracker:
     def _noise(self, used: np.ndarray) -> np.ndarray:
         """The measurement covariance R [s²] of the arrivals ``used`` (n,) bool: ``σ² I``, or ``diag(σ_i²)`` with a
         timing noise per receiver."""
-        if per_receiver(self._R):
+        if self._per_receiver:
             return np.diag(self._R[used])
-        return self._R * np.eye(int(used.sum()))
+        return self._R * self._eyes[int(used.sum())]
 
     def _gain_noise(self, K: np.ndarray, used: np.ndarray) -> np.ndarray:
         """``K R Kᵀ`` of the Joseph form for the gain K (s, k) of the arrivals ``used`` (n,) bool."""
-        if per_receiver(self._R):
+        if self._per_receiver:
             return (K * self._R[used]) @ K.T
         return self._R * K @ K.T
 
