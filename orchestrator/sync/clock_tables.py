@@ -1,6 +1,6 @@
 """The fitted clocks as ``sblsim sync``'s tables: ``offsets.csv`` (one row per synchronised receiver, or clock
-segment, and time bin: :func:`_offsets`) and ``sync.json``'s summary (the model, per receiver its offsets, drifts and
-their sigmas, and the diagnostics: :func:`_summary`).
+segment, and time bin: :func:`_offsets`), ``sync.json``'s summary (the model, per receiver its offsets, drifts and
+their sigmas, and the diagnostics: :func:`_summary`) and the residuals' ``reason`` column (:func:`_reasons`).
 """
 
 from __future__ import annotations
@@ -12,6 +12,15 @@ import pandas as pd
 
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.orchestrator.sync import segments
+
+#: A sync arrival's ``reason`` in the residuals (``residuals.csv``), by its code: kept (empty), or why not.
+REASONS = ("", "multipath", "single receiver", "clock break", "not synchronised", "rejected")
+
+
+def _reasons(code: np.ndarray) -> np.ndarray:
+    """The ``reason`` of each arrival (its :data:`REASONS` code (k,)): an object array whose rows share the six
+    strings (8 bytes a row; a string of its own per row took about 130, the largest column of a season's)."""
+    return np.array(REASONS, dtype=object)[code]
 
 
 def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.ndarray, origin: float

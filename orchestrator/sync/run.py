@@ -45,7 +45,7 @@ from sblsim.orchestrator.io.arguments import whole
 from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
-from sblsim.orchestrator.sync.clock_tables import _offsets, _summary
+from sblsim.orchestrator.sync.clock_tables import _offsets, _reasons, _summary
 from sblsim.orchestrator.sync.declared import check_sync_positions, sync_scale
 from sblsim.orchestrator.sync.refined_positions import _identify, _kept, _positions
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
@@ -361,8 +361,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     bridged = (fit.counts < MIN_BIN_ARRIVALS) & synced[:, None]
     bridged[start] = False
 
-    reason = np.where(duplicate, "multipath", np.where(single, "single receiver", np.where(
-        rows < 0, "clock break", np.where(~on, "not synchronised", np.where(fit.kept, "", "rejected")))))
+    reason = _reasons(np.select([duplicate, single, rows < 0, ~on, ~fit.kept], [1, 2, 3, 4, 5], 0))
     emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
     residuals = pd.DataFrame({
         "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
@@ -462,7 +461,7 @@ def _checks(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receiver
     speed = given or NOMINAL_SOUND_SPEED
     arrivals = pd.DataFrame({"receiver": np.array(names, dtype=object)[receiver],
                              "tag": np.array(tag_names, dtype=object)[tag], "emission": emission, "time": times,
-                             "reason": np.where(duplicate, "multipath", "")})
+                             "reason": _reasons(np.where(duplicate, 1, 0))})
     found = sync_scale(arrivals, hydrophones, hydrophones, given, time_quantum(times))
     where = "receivers" if receivers_file is None else f"receivers {receivers_file!r}"
     if found is None:
