@@ -442,7 +442,6 @@ def rts_smooth(x_filtered: np.ndarray, P_filtered: np.ndarray, x_predicted: np.n
     return xs, Ps
 
 
-
 def rts_gains(P_filtered: np.ndarray, P_predicted: np.ndarray, F: np.ndarray) -> np.ndarray:
     """The RTS smoother's gains ``C_k = P_k|k F_{k+1}ᵀ P_{k+1|k}⁻¹`` (m − 1, s, s) of a filter's record (m rows, as
     :func:`rts_smooth` takes them): they depend on the filter alone, so they are solved for every row at once (the
