@@ -16,7 +16,6 @@ from sblsim.models.receiver import toa_bound as tb  # noqa: E402
 from sblsim.models.receiver import toa_tracking as tt  # noqa: E402
 
 
-@pytest.mark.slow
 def test_the_inverted_lbl_rows_are_their_estimators_figures():
     cells = bench_consistency.inverted_lbl_cells(3, 0.0)
     assert set(cells) == set(bench_consistency.TOA_ESTIMATORS)
