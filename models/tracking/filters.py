@@ -18,7 +18,7 @@ import numpy as np
 
 from sblsim.models.receiver.sigma_points import MerweScaledSigmaPoints
 from sblsim.models.tracking.ekf import ToaTracker, TrackerSettings
-from sblsim.models.tracking.toa import _evaluate_pings, per_receiver
+from sblsim.models.tracking.toa import _evaluate_pings
 
 
 class ToaSeqTracker(ToaTracker):
@@ -49,18 +49,18 @@ class ToaSeqTracker(ToaTracker):
         if heard.any() and not self._set_passes(heard, toa - model, H[heard] @ P @ H[heard].T + self._noise(heard)
                                                 + W[np.ix_(heard, heard)]):
             heard = self._fix_kept(toa, heard, kept)
-        prediction, eye = x, np.eye(self.size)
+        prediction = x
         used = np.zeros(self.n, bool)
         for i in np.flatnonzero(heard):
             h = H[i]
-            Ri = R[i] if per_receiver(R) else R
+            Ri = R[i] if self._per_receiver else R
             nu = toa[i] - (model[i] + h @ (x - prediction))
             S = h @ P @ h + Ri
             if nu**2 / (S + W[i, i]) > s.gate:
                 continue
             k = P @ h / S
             x = x + k * nu
-            A = eye - np.outer(k, h)
+            A = self._eye - np.outer(k, h)
             P = A @ P @ A.T + Ri * np.outer(k, k)
             P = 0.5 * (P + P.T)
             used[i] = True
