@@ -175,18 +175,12 @@ def track(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelerati
 
 
 def casadi_called(receivers: np.ndarray, sound_speed: float):
-    """The baseline of the EKF's TOA model: :func:`toa_function` called per ping with numpy arguments, casadi
-    converting them and its results each time (as the EKF did before
+    """The baseline of the EKF's TOA model: :func:`~sblsim.models.tracking.toa.toa_model`, the casadi function
+    called per ping with numpy arguments, casadi converting them and its results each time (as the EKF did before
     :class:`~sblsim.models.tracking.toa.PingModel`)."""
-    from sblsim.models.tracking.toa import toa_function
+    from sblsim.models.tracking.toa import toa_model
 
-    function, positions = toa_function(*receivers.shape), np.asarray(receivers, float).T
-
-    def model(position: np.ndarray, emission: float) -> tuple[np.ndarray, np.ndarray]:
-        toa, J = function(position, emission, positions, sound_speed)
-        return np.asarray(toa).ravel(), np.asarray(J)
-
-    return model
+    return lambda position, emission: toa_model(position, emission, receivers, sound_speed)
 
 
 def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, acceleration_psd: float,
