@@ -60,6 +60,27 @@ def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled
     return S @ B @ S.T
 
 
+def survey_gains(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
+                 sigma_toa: float | np.ndarray = SIGMA_TOA) -> np.ndarray:
+    """How each receiver's survey error moves a stationary tag's pooled position: ``G_i = ∂p / ∂δr_i`` (n, dim, 2)
+    [m/m], ``δr_i`` the horizontal offset of receiver i's position as given from its true one.
+
+    The fit ranges to the position given, ``|p − r_i − δr_i| ≈ |p − r_i| − u_i · δr_i`` (``u_i`` the unit vector from
+    the receiver to the tag), so its arrivals look late by ``u_i · δr_i / c`` and the position moves by
+    ``S_i u_iᵀ δr_i / c`` (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`'s column ``S_i``): the
+    first-order consider sensitivity (Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004,
+    § 6.3). ``Σ_i σ_i² G_i G_iᵀ`` is :func:`stationary_consider`'s survey term; a still tag scored against receiver
+    k's surveyed position, itself off by the same ``δr_k``, errs by ``Σ_i G_i δr_i − δr_k``: its covariance has
+    ``−σ_k² (G_k + G_kᵀ)`` besides (:func:`place_score`'s ``cross``), which a tag heard at its own receiver (``G_k``
+    near the identity: the tag goes where its receiver is said to be) makes most of the survey's term."""
+    from sblsim.models.tracking.stationary import bias_sensitivity
+
+    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
+    diff = pooled.position[None, :] - positions
+    unit = diff / np.maximum(np.linalg.norm(diff, axis=1), 1e-9)[:, None]
+    return np.einsum("di,ij->idj", S, unit[:, :2]) / c
+
+
 def receivers_term(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
                    sigma_toa: float | np.ndarray) -> np.ndarray:
     """What the receivers' errors did to the pooled position (dim, dim) [m²]: the receivers' jackknife
@@ -156,7 +177,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     stretches = np.asarray(speed.get("stretches_m_s") or [], float)
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
-    rows = np.arange(m)
+    rows = first = np.arange(m)
     pooled, extra, spread = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
@@ -173,8 +194,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if went and not verdict.throughout:  # the rows after the last still fix moved
         last = int(verdict.order[verdict.change - 1])
         after[last + 1:] = True
-        pooled, extra, spread = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma,
-                                       clock_sigma)
+        first = rows[:last + 1]
+        pooled, extra, spread = _place(toa, positions, c, fx, first, sigma_toa, survey, speed_sigma, clock_sigma)
         emissions[:], kept[:] = _rows(pooled, rows[:last + 1], m)
         places[:last + 1], own[:last + 1], held[:last + 1] = pooled.position, pooled.covariance, extra
         first = int(verdict.order[verdict.change])
@@ -201,7 +222,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
                "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
                "receivers_jackknife_m": spread, "change": change,
-               "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist()}
+               "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),
+               "survey_gains": survey_gains(toa[first], positions, c, pooled, sigma_toa).tolist()}
     return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp],
                     {"still": summary, "moved": bool(went),
                      "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),
@@ -213,14 +235,31 @@ def _number(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def place_score(still: dict[str, Any], truth: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, float, float, float]:
+def place_score(still: dict[str, Any], truth: np.ndarray, known: np.ndarray,
+                cross: np.ndarray | None = None) -> tuple[np.ndarray, float, float, float]:
     """A still tag's place (``still``: :func:`still_tag`'s ``summary["still"]``, its ``place`` and ``covariance``)
     against a known position ``truth`` (≥ 2,) [m] of horizontal covariance ``known`` (2, 2) [m²]: its offset ``e``
-    (2,) [m], the error ``|e|`` [m], σ (the root trace of the place's horizontal covariance plus ``known``) [m] and
-    the 2-D NEES ``eᵀ (P + Q)⁻¹ e``."""
+    (2,) [m], the error ``|e|`` [m], σ (the root trace of the offset's covariance) [m] and the 2-D NEES
+    ``eᵀ C⁻¹ e``, ``C = P + Q − X − Xᵀ``. ``cross`` ``X`` (2, 2) [m²] is the covariance of the place's error with the
+    known position's, where both come from one survey: a tag scored against receiver k's position as surveyed, whose
+    place the same survey error moved, ``X = G_k Σ_k`` (:func:`survey_gains`' ``G_k``, ``Σ_k`` that receiver's survey
+    covariance); without it a tag heard at its own receiver counts that receiver's survey error twice."""
     P = np.asarray(still["covariance"], float)[:2, :2] + known
+    if cross is not None:
+        P = P - cross - cross.T
     e = np.asarray(still["place"], float)[:2] - np.asarray(truth, float)[:2]
     return e, float(np.hypot(*e)), float(np.sqrt(np.trace(P))), float(e @ np.linalg.solve(P, e))
 
 
-__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "still_tag"]
+def survey_cross(still: dict[str, Any], k: int, survey: np.ndarray) -> np.ndarray | None:
+    """:func:`place_score`'s ``cross`` (2, 2) [m²] for a still tag (``still``: its summary, with ``survey_gains``)
+    scored against the position of its receiver ``k`` (its index among the tracked receivers) as surveyed, of survey
+    covariance ``survey`` (2, 2) [m²]; None where the summary has no gains (written before them)."""
+    gains = still.get("survey_gains")
+    if gains is None:
+        return None
+    return np.asarray(gains, float)[k, :2] @ np.asarray(survey, float)
+
+
+__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "still_tag",
+           "survey_cross", "survey_gains"]

@@ -19,6 +19,7 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.readers.formats import FORMATS
+from sblsim.orchestrator.sync.survey_seen import survey_line
 from sblsim.orchestrator.sync.toa_console import say_warnings
 from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
 
@@ -240,6 +241,9 @@ def main(args: argparse.Namespace) -> int:
     rejected = d["used"] - d["kept"]
     print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
           f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")
+    seen = survey_line(s.get("survey_error"), s.get("survey_sigma_m"))
+    if seen:
+        print(f"  {seen}")
     noise = {r: v["toa_sigma_s"] for r, v in s.get("toa_noise", {}).items() if math.isfinite(v["toa_sigma_s"])}
     if noise:
         low, high = min(noise, key=noise.get), max(noise, key=noise.get)

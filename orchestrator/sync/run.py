@@ -48,6 +48,7 @@ from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _reasons, _summary
 from sblsim.orchestrator.sync.declared import check_sync_positions, sync_scale
 from sblsim.orchestrator.sync.refined_positions import _identify, _kept, _positions
+from sblsim.orchestrator.sync.survey_seen import seen_survey_error
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
 
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
@@ -200,6 +201,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                                alternatives=alternatives, window_days=window_days)
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
             outcome.summary["survey_sigma_m"] = dict(survey_sigma) if each else float(survey_sigma)
+        seen = seen_survey_error(outcome.residuals, outcome.sync_tags, outcome.receivers)  # on the table's positions
+        outcome.summary["survey_error"] = None if seen is None else seen.summary()
         return outcome
     if isinstance(survey_sigma, Mapping):
         raise TypeError("survey_sigma: one prior for the refinement, not each receiver's")

@@ -21,7 +21,7 @@ from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_
 from sblsim.models.sync.scale import SPEED_TOLERANCE
 from sblsim.models.sync.season import clocks_in_windows
 from sblsim.models.sync.windows import Windows
-from sblsim.models.tracking.still_tag import place_score, still_tag
+from sblsim.models.tracking.still_tag import place_score, still_tag, survey_cross
 from sblsim.orchestrator.sync import segments
 
 #: ``sync_tags.csv``'s columns of each left-out sync tag's one place (:func:`_still_place`): ``place_x_m``,
@@ -135,7 +135,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             found[found] = ems[k[found]] == emission[at_home[found]]
             arrival[k[found], home] = time[at_home[found]] - this.offset(c[at_home[found]], time[at_home[found]])
             rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white, offset_sigma,
-                                         survey, truth, truth_cov))
+                                         survey, truth, truth_cov, home))
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
                          "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
@@ -153,7 +153,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
 
 
 def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray, clock: np.ndarray,
-                 survey: np.ndarray | None, truth: np.ndarray, truth_cov: np.ndarray) -> dict:
+                 survey: np.ndarray | None, truth: np.ndarray, truth_cov: np.ndarray, home: int) -> dict:
     """A left-out sync tag scored as the still tag it is, as a reference tag is (:data:`PLACE_COLUMNS`): its one
     place from its emissions' arrivals (E, R) [s] (its own receiver's too: the clocks were fitted without any of
     them), synchronised by the clocks fitted without it (:func:`~sblsim.models.tracking.still_tag.still_tag`:
@@ -161,7 +161,9 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
     not average, each receiver's clock offset's sigma ``clock`` (R,) [s] and position's ``survey`` (R,) [m per axis;
     None: exact], and the receivers' jackknife; the emissions that moved beyond what those errors let its
     single-emission ``fixes`` (:func:`position_emissions`', without its own receiver) wander flagged), against
-    ``truth`` (dim,) [m] of covariance ``truth_cov`` [m²]: the 2-D NEES ``eᵀ (P + Q)⁻¹ e``; ``c`` [m/s]. NaN where
+    ``truth`` (dim,) [m] of covariance ``truth_cov`` [m²], its receiver ``home``'s position: the 2-D NEES
+    ``eᵀ (P + Q − X − Xᵀ)⁻¹ e``, ``X`` what that receiver's survey error moved the place by with it
+    (:func:`~sblsim.models.tracking.still_tag.survey_cross`, where a survey error is stated); ``c`` [m/s]. NaN where
     the place cannot be fitted (too few receivers: the reason in ``place_verdict``)."""
     try:
         still = still_tag(arrival, where, c, (fixes.position, fixes.emission_time, fixes.covariance, fixes.used),
@@ -169,7 +171,8 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
     except ModelError as exc:
         return dict.fromkeys(PLACE_COLUMNS, np.nan) | {"place_verdict": str(exc)}
     summary = still.summary["still"]
-    _, error, sigma, nees = place_score(summary, truth, truth_cov[:2, :2])
+    cross = None if survey is None else survey_cross(summary, home, truth_cov[:2, :2])
+    _, error, sigma, nees = place_score(summary, truth, truth_cov[:2, :2], cross)
     return {"place_x_m": summary["place"][0], "place_y_m": summary["place"][1], "place_error_m": error,
             "place_sigma_m": sigma, "place_nees": nees, "place_rows": len(still.pings),
             "place_flagged": int(still.moved.sum()), "place_verdict": summary["verdict"]}

@@ -5,17 +5,19 @@ A study's only truth is where its still tags are. Two kinds are scored, each per
 
 * **a reference tag** (the tag sheet's role ``reference``, tracked as still: one place for all its pings,
   :mod:`sblsim.models.tracking.still_tag`) at a known position: the sheet's ``lat``, ``lon`` [, ``depth_m``]
-  (projected into the study's frame), else the position of the deployment it sits at, the one the sheet's
-  ``receiver`` (or ``station``) cell names or else the one whose sync-tag cell names it (``truth`` says which). Its
-  place (its first, where it moved) against that position: the error [m] (2-D, and 3-D where both have a depth), its
-  σ [m] (the 2-D covariance's root trace), its 2-D NEES ``eᵀ (P + Q)⁻¹ e`` and its rows flagged. ``P`` is the place's
+  (projected into the study's frame), else the position of the deployment it sits at, the one the sheet's ``receiver``
+  (or ``station``) cell names or else the one whose sync-tag cell names it (``truth`` says which). Its place (its
+  first, where it moved) against that position: the error [m] (2-D, and 3-D where both have a depth), its σ [m] (the
+  2-D covariance's root trace), its 2-D NEES ``eᵀ (P + Q − X − Xᵀ)⁻¹ e`` and its rows flagged. ``P`` is the place's
   covariance as the tracker reports it (the pooled fit's, its consider terms: the clocks' offsets' uncertainty, the
-  sound speed's, and the receivers' jackknife, which measures what the other receivers' positions and paths do to
-  it); ``Q`` the position's own error, ``survey_sigma_m`` per horizontal axis where the sheet states it, else at a
+  sound speed's, and the receivers' jackknife, which measures what the other receivers' positions and paths do to it);
+  ``Q`` the position's own error, ``survey_sigma_m`` per horizontal axis where the sheet states it, else at a
   deployment the study's stated survey error (``--survey-sigma`` without the refinement), else none (the position
-  taken as exact: said). Beside it the tracker's single-ping least-squares fixes' median error (the
-  naive estimate). A tag tracked as moving (``motion`` ``moving``) is scored row by row (its rows not flagged: the
-  median error, the mean NEES of ``diag(sigma_x², sigma_y²) + Q``).
+  taken as exact: said); ``X`` the place's covariance with that position's error where both are one survey's (a tag at
+  a deployment whose survey error the tracker took: what that receiver's error moved the place by,
+  :func:`~sblsim.models.tracking.still_tag.survey_cross`; else none). Beside it the tracker's single-ping
+  least-squares fixes' median error (the naive estimate). A tag tracked as moving (``motion`` ``moving``) is scored
+  row by row (its rows not flagged: the median error, the mean NEES of ``diag(sigma_x², sigma_y²) + Q``).
 * **every sync tag left out of the synchronisation in turn**: the synchronisation's own leave-one-out
   (``sync_tags.csv``, :mod:`sblsim.orchestrator.sync.sync_tags`, with the clocks fitted without its arrivals), taken
   as it is, not fitted again: its one place from all its arrivals, its own receiver's too, by the reference tags'
@@ -46,20 +48,18 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.tracking.still_tag import place_score
+from sblsim.models.tracking.still_tag import place_score, survey_cross
 from sblsim.orchestrator.readers.cells import numbers, pattern
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE
 from sblsim.orchestrator.readers.tag_sheet import TagSpec
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER, match
 from sblsim.orchestrator.sync.clocks import _columns, _in_folder
+from sblsim.orchestrator.sync.survey_seen import pairs
 from sblsim.orchestrator.sync.sync_tags import PLACE_COLUMNS
 
 #: A reference tag is said to lie beyond its σ where its 2-D NEES passes χ²(2)'s quantile at this level.
 BEYOND_LEVEL = 0.99
-#: The fewest kept arrivals of one sync tag at a receiver whose median residual counts in
-#: :func:`persistent_residual`.
-MIN_PAIR_ARRIVALS = 10
 #: ``reference_tags.csv``'s columns: ``kind`` ``reference`` or ``sync_left_out``; ``truth`` where the position
 #: scored against comes from; ``truth_*`` that position (in the frame [m], WGS 84 [°]); ``x_m``, ``y_m``, ``z_m`` the
 #: tag's place and ``error_east_m``, ``error_north_m`` its offset from that position (the frame's x and y);
@@ -86,25 +86,23 @@ def consistent(n: int) -> list[float]:
     return [float(chi2.ppf(0.05, 2 * n) / n), float(chi2.ppf(0.95, 2 * n) / n)]
 
 
-def persistent_residual(residuals: pd.DataFrame, receiver: str) -> float:
+def persistent_residual(pairs: pd.DataFrame, receiver: str) -> float:
     """[m] What the synchronisation's residuals at ``receiver`` keep that its clock does not explain: the root mean
     square, weighted by their arrivals, of the median residual of each other receiver's sync tag it hears (at least
-    :data:`MIN_PAIR_ARRIVALS` kept arrivals; its own sync tag, at no distance, left out); NaN where none.
+    :data:`~sblsim.models.sync.survey_error.MIN_PAIR_ARRIVALS` kept arrivals; its own sync tag, at no distance, left
+    out); NaN where none.
 
     Parameters
     ----------
-    residuals : pandas.DataFrame
-        ``residuals.csv`` (:class:`~sblsim.orchestrator.sync.run.SyncOutcome`): ``receiver``, ``tag``,
-        ``distance_m``, ``residual_m``, ``kept``.
+    pairs : pandas.DataFrame
+        The residuals' pairs (:func:`~sblsim.orchestrator.sync.survey_seen.pairs` of ``residuals.csv``):
+        ``receiver``, ``median`` [m], ``count``.
     receiver : str
     """
-    r = residuals[(residuals["receiver"].astype(str) == receiver) & residuals["kept"].to_numpy(bool)
-                  & (residuals["distance_m"].to_numpy(float) > 0)]
-    pairs = r.groupby("tag")["residual_m"].agg(["median", "size"])
-    pairs = pairs[pairs["size"] >= MIN_PAIR_ARRIVALS]
-    if not len(pairs):
+    mine = pairs[pairs["receiver"] == receiver]
+    if not len(mine):
         return float("nan")
-    return float(np.sqrt(np.average(pairs["median"] ** 2, weights=pairs["size"])))
+    return float(np.sqrt(np.average(mine["median"] ** 2, weights=mine["count"])))
 
 
 def _deployment(spec: TagSpec, table: pd.DataFrame) -> tuple[pd.DataFrame, str] | str:
@@ -181,7 +179,7 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
     rows, flagged = _row(track)
     if still is not None:  # one place (its first, where it moved) and its covariance
         place = np.asarray(still["place"], float)
-        e, error, sigma, nees = place_score(still, q, Q)
+        e, error, sigma, nees = place_score(still, q, Q, _cross(s, still, truth["receiver"], survey))
         verdict, scored_by = still["verdict"], "one place"
         depth = place[2] - q[2] if len(place) > 2 else np.nan
     else:  # tracked as moving: its rows not flagged, one by one
@@ -206,6 +204,18 @@ def score_reference(tag: str, outcome, truth: dict[str, Any]) -> dict[str, Any]:
             "scored_by": scored_by,
             "single_fix_median_error_m": float(np.median(np.linalg.norm(fixes - q[:2], axis=1))) if len(fixes)
             else np.nan, "receiver_persistent_m": np.nan, "in_sync": truth["in_sync"], "inside_array": None}
+
+
+def _cross(summary: dict[str, Any], still: dict[str, Any], receiver: str, survey: float) -> np.ndarray | None:
+    """The covariance (2, 2) [m²] of a reference tag's place with its deployment ``receiver``'s surveyed position
+    (of error ``survey`` [m per axis]) where the tracker took that receiver's survey error too (its summary's
+    ``survey_sigma_m``): one error, in the place and in the position scored against
+    (:func:`~sblsim.models.tracking.still_tag.survey_cross`); None otherwise."""
+    tracked = (summary.get("survey_sigma_m") or {}).get(receiver) if receiver and survey > 0 else None
+    names = list(summary.get("receivers") or [])
+    if not tracked or receiver not in names:
+        return None
+    return survey_cross(still, names.index(receiver), tracked * survey * np.eye(2))
 
 
 def sync_rows(table: pd.DataFrame | None) -> list[dict[str, Any]]:
@@ -335,7 +345,7 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         ``sync_tags.csv`` refused: the tracks stand, its line said).
     """
     refs, missing, terms = [], [], set()
-    residuals = None if synced is None else synced.residuals
+    paired = None if synced is None else pairs(synced.residuals)
     for (name, spec), row in zip(asked, tags.to_dict("records")):
         if spec.role != "reference":
             continue
@@ -349,8 +359,8 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         outcome = outcomes[row["folder"]]
         refs.append(score_reference(str(row["tag"]), outcome, truth))
         terms |= set((outcome.summary.get("motion") or {}).get("consider_terms") or [])
-        if residuals is not None and truth["receiver"]:
-            refs[-1]["receiver_persistent_m"] = persistent_residual(residuals, truth["receiver"])
+        if paired is not None and truth["receiver"]:
+            refs[-1]["receiver_persistent_m"] = persistent_residual(paired, truth["receiver"])
     notes = []
     try:
         table = synced.sync_tags if synced is not None else None if sync_dir is None else given_sync_tags(sync_dir)
@@ -362,8 +372,8 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
     for r in loo if stated is not None else ():  # their NEES holds the survey's stated error
         r["survey_sigma_m"] = _each(stated, r["receiver"])
     array = None
-    if residuals is not None and refs:  # the same figure at every receiver: its median
-        values = [persistent_residual(residuals, r) for r in residuals["receiver"].astype(str).unique()]
+    if paired is not None and refs:  # the same figure at every receiver: its median
+        values = [persistent_residual(paired, r) for r in synced.residuals["receiver"].astype(str).unique()]
         array = float(np.nanmedian(values)) if np.isfinite(values).any() else None
     return {"tags": refs + loo, "reference": _pooled_references(refs, terms), "sync_left_out": _pooled_sync(loo),
             "still": _pooled_still(refs + loo), "not_scored": missing, "array_persistent_m": array, "notes": notes}
@@ -419,5 +429,5 @@ def table(summary: dict[str, Any] | None) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(COLUMNS))
 
 
-__all__ = ["BEYOND_LEVEL", "COLUMNS", "MIN_PAIR_ARRIVALS", "beyond", "consistent", "given_sync_tags",
+__all__ = ["BEYOND_LEVEL", "COLUMNS", "beyond", "consistent", "given_sync_tags",
            "persistent_residual", "score", "score_reference", "sync_rows", "table", "truth_of"]

@@ -59,7 +59,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                     "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
                     "clock_breaks": s["clock_breaks"],
                     "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
-                    "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m")}
+                    "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m"),
+                    "survey_error": s.get("survey_error"), "survey_sigma_m": s.get("survey_sigma_m")}
             if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
                 info["windows"] = s["windows"]
             return offsets_clocks(outcome.offsets), table, info, outcome

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from sblsim.orchestrator.sync.survey_seen import survey_line
 from sblsim.orchestrator.tracks.depth import water_line
 from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE
 from sblsim.orchestrator.tracks.tracker import noise_line
@@ -35,6 +36,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                                                                       if c["not_synchronised"] else "")
                    + (f"; in {c['windows']['count']} windows of {c['windows']['days']:g} days" if "windows" in c
                       else ""))
+        seen = survey_line(c.get("survey_error"), c.get("survey_sigma_m"))
+        out.extend([f"  {seen}"] if seen else [])
     elif c["source"] == "given":
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
     elif "one receiver" in c["source"]:

@@ -239,9 +239,10 @@ STATED = 2.0
 def test_a_stated_survey_error_is_in_every_sigma(study):
     """The same study with the receivers' survey error stated (``survey_sigma`` without ``refine_positions``): the
     reference tags at a deployment take it as their position's error, the one with its own (the sheet's) keeps it,
-    each NEES against a scoring made here with it; each still tag's covariance holds the receivers' survey term (larger
-    than without it in every direction); the sync tags left out are the same fixes with the stated error in their
-    NEES (errors unchanged, NEES lower, ``survey_sigma_m`` said)."""
+    each NEES against a scoring made here with it (at a deployment, less the place's covariance with that receiver's
+    survey error, from the place's gains: one error, counted once); each still tag's covariance holds the receivers'
+    survey term (larger than without it in every direction); the sync tags left out are the same fixes with the
+    stated error in their NEES (errors unchanged, NEES lower, ``survey_sigma_m`` said)."""
     sim, refs, plain, out = study
     folder = out.parent
     outcome = run_study(folder / "in" / "detections.csv", folder / "in" / "deployments.csv", folder / "in" / "tags.csv",
@@ -254,14 +255,18 @@ def test_a_stated_survey_error_is_in_every_sigma(study):
     tags = _read(folder / "stated", "tags.csv").set_index("tag")
     tracks = _read(folder / "stated", "tracks.csv")
     for k, tag in enumerate(refs):
-        still = json.loads((folder / "stated" / tags.loc[tag, "folder"] / "summary.json").read_text())["motion"]
+        summary = json.loads((folder / "stated" / tags.loc[tag, "folder"] / "summary.json").read_text())
+        still = summary["motion"]
         place = tracks.loc[tracks["tag"] == tag, ["x", "y"]].to_numpy(float)[0]  # a still tag: one place
         survey = SURVEY if k == 0 else STATED
         P = np.asarray(still["still"]["covariance"], float)[:2, :2]
         e = place - sim.positions[AT[k]][:2]
+        # at a deployment, one survey error moved the place and is the position's: their covariance taken out
+        at = summary["receivers"].index(scored.loc[tag, "receiver"]) if k else None
+        X = 0.0 if at is None else STATED * survey * np.asarray(still["still"]["survey_gains"], float)[at, :2]
         assert scored.loc[tag, "survey_sigma_m"] == survey
-        assert scored.loc[tag, "nees"] == pytest.approx(e @ np.linalg.solve(P + survey**2 * np.eye(2), e),
-                                                        rel=1e-3, abs=1e-6)
+        C = P + survey**2 * np.eye(2) - X - np.transpose(X)
+        assert scored.loc[tag, "nees"] == pytest.approx(e @ np.linalg.solve(C, e), rel=1e-3, abs=1e-6)
         plain_still = json.loads((out / _read(out, "tags.csv").set_index("tag").loc[tag, "folder"] /
                                   "summary.json").read_text())["motion"]["still"]
         grown = P - np.asarray(plain_still["covariance"], float)[:2, :2]

@@ -1,0 +1,75 @@
+"""The receivers' survey error a synchronisation's residuals show (:mod:`sblsim.models.sync.survey_error`), from its
+tables: each pair of a sync tag and a receiver that heard it, not its own, with at least
+:data:`~sblsim.models.sync.survey_error.MIN_PAIR_ARRIVALS` kept arrivals; their median residual, robust scale and
+count; the receivers' positions as the table gives them.
+
+Units: metres [m].
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.sync.survey_error import MIN_PAIR_ARRIVALS, SurveyError, survey_error
+
+
+def pairs(residuals: pd.DataFrame) -> pd.DataFrame:
+    """Each (``receiver``, ``tag``) pair of a synchronisation's kept arrivals at a distance [m] (a sync tag heard at a
+    receiver not its own), with at least :data:`MIN_PAIR_ARRIVALS` of them: their ``median`` residual [m], robust
+    ``scale`` [m] (1.4826 × the median absolute deviation) and ``count``."""
+    kept = residuals[residuals["kept"].to_numpy(bool) & (residuals["distance_m"].to_numpy(float) > 0)]
+    keys = [kept["receiver"].astype(str), kept["tag"].astype(str)]
+    groups = kept["residual_m"].groupby(keys)
+    table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
+    table["scale"] = 1.4826 * (kept["residual_m"] - groups.transform("median")).abs().groupby(keys).median()
+    return table[table["count"] >= MIN_PAIR_ARRIVALS].reset_index()
+
+
+def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receivers: pd.DataFrame
+                      ) -> SurveyError | None:
+    """The survey error the residuals show (:func:`~sblsim.models.sync.survey_error.survey_error`); None where no
+    pair is left.
+
+    Parameters
+    ----------
+    residuals : pandas.DataFrame
+        ``residuals.csv``: ``receiver``, ``tag``, ``distance_m``, ``residual_m``, ``kept``.
+    sync_tags : pandas.DataFrame
+        ``sync_tags.csv``: each sync tag's own ``receiver``.
+    receivers : pandas.DataFrame
+        The receivers' ``receiver``, ``x``, ``y`` [m] as the table gives them.
+    """
+    table = pairs(residuals)
+    home = dict(zip(sync_tags["tag"].astype(str), sync_tags["receiver"].astype(str)))
+    names = receivers["receiver"].astype(str).tolist()
+    index = {n: i for i, n in enumerate(names)}
+    table = table[table["tag"].map(home).isin(index) & table["receiver"].isin(index)]
+    table = table[table["tag"].map(home) != table["receiver"]]
+    if not len(table):
+        return None
+    tags = {t: i for i, t in enumerate(sorted(set(table["tag"])))}
+    return survey_error(table["median"].to_numpy(float), table["count"].to_numpy(float),
+                        table["scale"].to_numpy(float), table["receiver"].map(index).to_numpy(int),
+                        table["tag"].map(home).map(index).to_numpy(int), table["tag"].map(tags).to_numpy(int),
+                        receivers[["x", "y"]].to_numpy(float))
+
+
+def survey_line(seen: dict | None, stated: float | dict | None) -> str | None:
+    """The console's line of the survey error a synchronisation saw (``seen``: ``sync.json``'s ``survey_error``;
+    ``stated``: its ``survey_sigma_m``, the survey's error given); None where no pair was left."""
+    if not seen or seen.get("pairs", 0) == 0 or not np.isfinite(seen.get("excess_z") or np.nan):
+        return None
+    said = f"{seen['pairs']} pairs of a sync tag and a receiver"
+    if not seen["seen"]:
+        return (f"survey error not seen in the synchronisation's residuals between receivers ({said}: their excess "
+                f"over the arrivals' noise {seen['excess_z']:.2g} standard deviations, below {seen['z_seen']:g})")
+    if stated is None:
+        given = f"the positions taken as exact: --survey-sigma {seen['survey_sigma_m']:.3g} states it in every σ"
+    else:
+        given = "stated: " + (f"{stated:g} m" if not isinstance(stated, dict) else "each receiver's")
+    return (f"survey error seen in the synchronisation's residuals between receivers: {seen['survey_sigma_m']:.3g} "
+            f"± {seen['survey_sigma_se_m']:.2g} m per axis ({said}; {given})")
+
+
+__all__ = ["pairs", "seen_survey_error", "survey_line"]
