@@ -19,7 +19,7 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.readers.formats import FORMATS
-from sblsim.orchestrator.sync.survey_seen import survey_line
+from sblsim.orchestrator.sync.survey_console import survey_line
 from sblsim.orchestrator.sync.toa_console import say_warnings
 from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
 

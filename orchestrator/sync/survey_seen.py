@@ -8,7 +8,6 @@ Units: metres [m].
 
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
 from sblsim.models.sync.survey_error import MIN_PAIR_ARRIVALS, SurveyError, survey_error
@@ -55,21 +54,4 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
                         receivers[["x", "y"]].to_numpy(float))
 
 
-def survey_line(seen: dict | None, stated: float | dict | None) -> str | None:
-    """The console's line of the survey error a synchronisation saw (``seen``: ``sync.json``'s ``survey_error``;
-    ``stated``: its ``survey_sigma_m``, the survey's error given); None where no pair was left."""
-    if not seen or seen.get("pairs", 0) == 0 or not np.isfinite(seen.get("excess_z") or np.nan):
-        return None
-    said = f"{seen['pairs']} pairs of a sync tag and a receiver"
-    if not seen["seen"]:
-        return (f"survey error not seen in the synchronisation's residuals between receivers ({said}: their excess "
-                f"over the arrivals' noise {seen['excess_z']:.2g} standard deviations, below {seen['z_seen']:g})")
-    if stated is None:
-        given = f"the positions taken as exact: --survey-sigma {seen['survey_sigma_m']:.3g} states it in every σ"
-    else:
-        given = "stated: " + (f"{stated:g} m" if not isinstance(stated, dict) else "each receiver's")
-    return (f"survey error seen in the synchronisation's residuals between receivers: {seen['survey_sigma_m']:.3g} "
-            f"± {seen['survey_sigma_se_m']:.2g} m per axis ({said}; {given})")
-
-
-__all__ = ["pairs", "seen_survey_error", "survey_line"]
+__all__ = ["pairs", "seen_survey_error"]

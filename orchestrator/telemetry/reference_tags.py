@@ -46,6 +46,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.stats import chi2
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.still_tag import place_score, survey_cross
@@ -81,8 +82,6 @@ def beyond() -> float:
 def consistent(n: int) -> list[float]:
     """The 90 % interval of the mean of ``n`` 2-D NEES whose σ holds: χ²(2n) / n's 5 % and 95 % quantiles (a pooled
     NEES outside it says the σ does not hold; three tags' mean lies anywhere in about [0.55, 4.2])."""
-    from scipy.stats import chi2
-
     return [float(chi2.ppf(0.05, 2 * n) / n), float(chi2.ppf(0.95, 2 * n) / n)]
 
 

@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from sblsim.orchestrator.sync.survey_seen import survey_line
+from sblsim.orchestrator.sync.survey_console import survey_line
 from sblsim.orchestrator.tracks.depth import water_line
 from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE
 from sblsim.orchestrator.tracks.tracker import noise_line

@@ -53,7 +53,8 @@ def test_the_variance_is_unbiased_and_its_standard_error_the_spread(sigma):
     assert all(f.seen for f in found)
     assert abs(np.mean(est**2) - sigma**2) < 3 * np.std(est**2) / np.sqrt(len(est))
     assert np.mean([f.sigma_se for f in found]) == pytest.approx(np.std(est), rel=0.2)
-    assert found[0].degrees == found[0].pairs - (R + 6 + 1 - 1)  # the clocks, the tags, the speed; one in common
+    # the pairs kept less the clocks, the tags and the speed (one in common)
+    assert all(f.degrees == f.pairs - f.set_aside - (R + 6 + 1 - 1) for f in found)
 
 
 def test_without_a_survey_error_it_is_seldom_seen():
@@ -66,6 +67,24 @@ def test_without_a_survey_error_it_is_seldom_seen():
     assert abs(z.mean()) < 0.2 and 0.8 < z.std() < 1.25
     assert np.mean(z >= Z_SEEN) < 0.03
     assert all(f.sigma == 0.0 for f in found if not f.seen)
+
+
+def test_pairs_a_reflection_lengthens_are_set_aside():
+    """σ = 1 m, and one pair in twenty 10 to 30 m long (a reflection for the whole season): over 100 draws σ̂ stays
+    within 15 % of σ in root mean square, those pairs set aside in nine draws of ten."""
+    array = _array(6)
+    rng = np.random.default_rng(7)
+    P = len(array[1])
+    est, aside = [], []
+    for _ in range(100):
+        m = _medians(rng, 1.0, *array)
+        bent = rng.permutation(P)[: P // 20]
+        m[bent] += rng.uniform(10.0, 30.0, len(bent))
+        found = survey_error(m, array[4], array[5], array[1], array[2], array[3], array[0])
+        est.append(found.sigma)
+        aside.append(found.set_aside >= len(bent))
+    assert abs(np.sqrt(np.mean(np.square(est))) - 1.0) < 0.15, np.sqrt(np.mean(np.square(est)))
+    assert np.mean(aside) > 0.9
 
 
 def test_what_the_fit_absorbs_changes_nothing():

@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from sblsim.models.sync.survey_error import MIN_PAIR_ARRIVALS, survey_error
-from sblsim.orchestrator.sync.survey_seen import pairs, seen_survey_error, survey_line
+from sblsim.orchestrator.sync.survey_console import survey_line
+from sblsim.orchestrator.sync.survey_seen import pairs, seen_survey_error
 
 POSITIONS = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 250.0], [0.0, 250.0], [150.0, 120.0], [60.0, 200.0]])
 NAMES = [f"R{j}" for j in range(len(POSITIONS))]
@@ -70,6 +71,8 @@ def test_the_console_line_says_what_was_seen_and_what_to_do():
     line = survey_line(seen, None)
     assert "3.02 ± 0.62 m per axis (70 pairs" in line and "--survey-sigma 3.02" in line
     assert survey_line(seen, 1.0).endswith("stated: 1 m)")
+    assert "70 pairs of a sync tag and a receiver, 8 set aside as a path too long" in survey_line(
+        seen | {"pairs_set_aside": 8}, None)
     unseen = seen | {"survey_sigma_m": 0.0, "excess_z": 1.2, "seen": False}
     assert "not seen" in survey_line(unseen, None) and "1.2 standard deviations, below 3" in survey_line(unseen, None)
     assert survey_line(None, None) is None and survey_line(seen | {"pairs": 0}, None) is None
