@@ -1,23 +1,28 @@
 """The receivers' survey error a synchronisation's residuals show (:mod:`sblsim.models.sync.survey_error`), from its
 tables: each pair of a sync tag and a receiver that heard it, not its own, with at least
-:data:`~sblsim.models.sync.survey_error.MIN_PAIR_ARRIVALS` kept arrivals; their median residual, robust scale and
-count; the receivers' positions as the table gives them.
+:data:`~sblsim.models.sync.survey_error.MIN_PAIR_ARRIVALS` arrivals with a residual (the fit's rejected ones too);
+their median residual, robust scale and count; the receivers' positions as the table gives them.
 
 Units: metres [m].
 """
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 from sblsim.models.sync.survey_error import MIN_PAIR_ARRIVALS, SurveyError, survey_error
 
 
-def pairs(residuals: pd.DataFrame) -> pd.DataFrame:
+def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     """Each (``receiver``, ``tag``) pair of a synchronisation's kept arrivals at a distance [m] (a sync tag heard at a
     receiver not its own), with at least :data:`MIN_PAIR_ARRIVALS` of them: their ``median`` residual [m], robust
-    ``scale`` [m] (1.4826 × the median absolute deviation) and ``count``."""
-    kept = residuals[residuals["kept"].to_numpy(bool) & (residuals["distance_m"].to_numpy(float) > 0)]
+    ``scale`` [m] (1.4826 × the median absolute deviation) and ``count``. With ``rejected`` the arrivals the fit
+    rejected are in too (every arrival with a residual): a position off by more than the timing noise allows makes
+    the arrivals of its pairs look like outliers, and leaving them out hides the error sought (the median keeps a
+    late arrival from counting)."""
+    used = residuals["kept"].to_numpy(bool) if not rejected else np.isfinite(residuals["residual_m"].to_numpy(float))
+    kept = residuals[used & (residuals["distance_m"].to_numpy(float) > 0)]
     keys = [kept["receiver"].astype(str), kept["tag"].astype(str)]
     groups = kept["residual_m"].groupby(keys)
     table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
@@ -39,7 +44,7 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
     receivers : pandas.DataFrame
         The receivers' ``receiver``, ``x``, ``y`` [m] as the table gives them.
     """
-    table = pairs(residuals)
+    table = pairs(residuals, rejected=True)
     home = dict(zip(sync_tags["tag"].astype(str), sync_tags["receiver"].astype(str)))
     names = receivers["receiver"].astype(str).tolist()
     index = {n: i for i, n in enumerate(names)}

@@ -38,12 +38,13 @@ def _residuals(seed: int = 0, sigma: float = 1.0) -> tuple[pd.DataFrame, pd.Data
     return residuals, sync_tags, receivers
 
 
-def test_the_pairs_are_each_receiver_and_tags_kept_arrivals_at_a_distance():
+@pytest.mark.parametrize("rejected", [False, True])
+def test_the_pairs_are_each_receiver_and_tags_kept_arrivals_at_a_distance(rejected):
     residuals, _, _ = _residuals()
-    table = pairs(residuals).set_index(["receiver", "tag"])
+    table = pairs(residuals, rejected).set_index(["receiver", "tag"])
     expected = {}
     for (receiver, tag), rows in residuals.groupby(["receiver", "tag"]):
-        r = rows.loc[rows["kept"] & (rows["distance_m"] > 0), "residual_m"].to_numpy()
+        r = rows.loc[(rows["kept"] | rejected) & (rows["distance_m"] > 0), "residual_m"].to_numpy()
         if len(r) >= MIN_PAIR_ARRIVALS:
             expected[(receiver, tag)] = (np.median(r), len(r), 1.4826 * np.median(np.abs(r - np.median(r))))
     assert set(table.index) == set(expected) and ("R3", "S2") not in expected and ("R0", "S0") not in expected
@@ -55,14 +56,16 @@ def test_the_pairs_are_each_receiver_and_tags_kept_arrivals_at_a_distance():
 def test_the_estimate_is_the_models_on_the_pairs():
     residuals, sync_tags, receivers = _residuals(1, sigma=2.0)
     found = seen_survey_error(residuals, sync_tags, receivers)
-    table = pairs(residuals)
+    table = pairs(residuals, rejected=True)
     home = table["tag"].str[1:].astype(int).to_numpy()
     listener = table["receiver"].str[1:].astype(int).to_numpy()
     tags = {"S0": 0, "S2": 1, "S4": 2}
     direct = survey_error(table["median"].to_numpy(), table["count"].to_numpy(), table["scale"].to_numpy(),
                           listener, home, table["tag"].map(tags).to_numpy(), POSITIONS)
     assert found == direct and found.pairs == len(table) and found.seen
-    assert seen_survey_error(residuals.assign(kept=False), sync_tags, receivers) is None
+    assert seen_survey_error(residuals.assign(residual_m=np.nan), sync_tags, receivers) is None
+    # the arrivals the fit rejected count: the same estimate whatever their kept flag
+    assert seen_survey_error(residuals.assign(kept=False), sync_tags, receivers) == found
 
 
 def test_the_console_line_says_what_was_seen_and_what_to_do():
