@@ -22,7 +22,7 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     the arrivals of its pairs look like outliers, and leaving them out hides the error sought (the median keeps a
     late arrival from counting)."""
     used = residuals["kept"].to_numpy(bool) if not rejected else np.isfinite(residuals["residual_m"].to_numpy(float))
-    kept = residuals[used & (residuals["distance_m"].to_numpy(float) > 0)]
+    kept = residuals.loc[used & (residuals["distance_m"].to_numpy(float) > 0), ["receiver", "tag", "residual_m"]]
     keys = [kept["receiver"].astype(str), kept["tag"].astype(str)]
     groups = kept["residual_m"].groupby(keys)
     table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
