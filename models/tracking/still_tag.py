@@ -71,8 +71,9 @@ def survey_gains(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
     first-order consider sensitivity (Tapley, Schutz & Born, *Statistical Orbit Determination*, Elsevier 2004,
     § 6.3). ``Σ_i σ_i² G_i G_iᵀ`` is :func:`stationary_consider`'s survey term; a still tag scored against receiver
     k's surveyed position, itself off by the same ``δr_k``, errs by ``Σ_i G_i δr_i − δr_k``: its covariance has
-    ``−σ_k² (G_k + G_kᵀ)`` besides (:func:`place_score`'s ``cross``), which a tag heard at its own receiver (``G_k``
-    near the identity: the tag goes where its receiver is said to be) makes most of the survey's term."""
+    ``−σ_k² (G_k + G_kᵀ)`` besides (:func:`place_score`'s ``cross``): a tag heard near its own receiver moves with
+    that receiver's position along their line (``G_k`` of rank about one, a third to two thirds along it on the
+    boats' reference tags), and that share of the receiver's error is no error of the score."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
@@ -177,7 +178,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     stretches = np.asarray(speed.get("stretches_m_s") or [], float)
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
-    rows = first = np.arange(m)
+    rows = placed = np.arange(m)  # the rows of the place scored (its first, where it moved)
     pooled, extra, spread = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
@@ -194,8 +195,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if went and not verdict.throughout:  # the rows after the last still fix moved
         last = int(verdict.order[verdict.change - 1])
         after[last + 1:] = True
-        first = rows[:last + 1]
-        pooled, extra, spread = _place(toa, positions, c, fx, first, sigma_toa, survey, speed_sigma, clock_sigma)
+        placed = rows[:last + 1]
+        pooled, extra, spread = _place(toa, positions, c, fx, placed, sigma_toa, survey, speed_sigma, clock_sigma)
         emissions[:], kept[:] = _rows(pooled, rows[:last + 1], m)
         places[:last + 1], own[:last + 1], held[:last + 1] = pooled.position, pooled.covariance, extra
         first = int(verdict.order[verdict.change])
@@ -223,7 +224,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
                "receivers_jackknife_m": spread, "change": change,
                "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),
-               "survey_gains": survey_gains(toa[first], positions, c, pooled, sigma_toa).tolist()}
+               "survey_gains": survey_gains(toa[placed], positions, c, pooled, sigma_toa).tolist()}
     return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp],
                     {"still": summary, "moved": bool(went),
                      "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),

@@ -85,7 +85,7 @@ def consistent(n: int) -> list[float]:
     return [float(chi2.ppf(0.05, 2 * n) / n), float(chi2.ppf(0.95, 2 * n) / n)]
 
 
-def persistent_residual(pairs: pd.DataFrame, receiver: str) -> float:
+def persistent_residual(paired: pd.DataFrame, receiver: str) -> float:
     """[m] What the synchronisation's residuals at ``receiver`` keep that its clock does not explain: the root mean
     square, weighted by their arrivals, of the median residual of each other receiver's sync tag it hears (at least
     :data:`~sblsim.models.sync.survey_error.MIN_PAIR_ARRIVALS` kept arrivals; its own sync tag, at no distance, left
@@ -93,12 +93,12 @@ def persistent_residual(pairs: pd.DataFrame, receiver: str) -> float:
 
     Parameters
     ----------
-    pairs : pandas.DataFrame
+    paired : pandas.DataFrame
         The residuals' pairs (:func:`~sblsim.orchestrator.sync.survey_seen.pairs` of ``residuals.csv``):
         ``receiver``, ``median`` [m], ``count``.
     receiver : str
     """
-    mine = pairs[pairs["receiver"] == receiver]
+    mine = paired[paired["receiver"] == receiver]
     if not len(mine):
         return float("nan")
     return float(np.sqrt(np.average(mine["median"] ** 2, weights=mine["count"])))

@@ -30,7 +30,7 @@ def _fix(toa, table, sigma):
 @pytest.mark.parametrize("where", [np.array([120.0, 60.0]), np.array([3.0, 4.0])])
 def test_the_gains_are_the_pooled_fix_moved_with_a_receiver(where):
     """``G_k`` against central differences of the pooled fix with receiver k's position moved ±1 mm along each axis,
-    in the array and 5 m from a receiver."""
+    in the array and 5 m from a receiver; their sum the identity (a translation of the array translates the place)."""
     rng = np.random.default_rng(1)
     toa = _pings(rng, where, 60, 1e-4)
     fix = _fix(toa, RECEIVERS, 1e-4)
@@ -44,6 +44,8 @@ def test_the_gains_are_the_pooled_fix_moved_with_a_receiver(where):
             ends = [stationary_fix(toa, r, C, 1e-4, fix.position).position for r in moved]
             numeric[:, axis] = (ends[0] - ends[1]) / 2e-3
         np.testing.assert_allclose(gains[k], numeric, atol=0.01)
+    # the whole array moved moves the place with it: the gains sum to the identity
+    np.testing.assert_allclose(gains.sum(axis=0), np.eye(2), atol=1e-6)
 
 
 @pytest.mark.slow
