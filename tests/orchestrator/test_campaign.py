@@ -238,6 +238,17 @@ def test_ctrl_c_exits_130_and_resume_gives_the_uninterrupted_result(kill_referen
     assert_same_runs(read_runs(out), kill_reference)
 
 
+def test_an_interruption_says_what_is_kept_and_how_to_finish(tmp_path):
+    """The interruption the runner raises (its processes' signals are the slow tests above and below): the runs
+    saved of all, the folder, and ``--resume``; not an error of the error kinds (finished work is kept)."""
+    from sblsim.models.errors import SblsimError
+    from sblsim.orchestrator.campaign.errors import CampaignInterrupted
+
+    stop = CampaignInterrupted(12, 40, tmp_path)
+    assert str(stop) == f"interrupted: 12 of 40 runs saved in {tmp_path}; finish with --resume"
+    assert (stop.done, stop.total, stop.out) == (12, 40, tmp_path) and not isinstance(stop, SblsimError)
+
+
 @pytest.mark.slow
 def test_sigterm_keeps_the_work_and_says_how_to_finish(kill_reference, tmp_path):
     proc, out, _, stderr = _start_and_stop_part_way(tmp_path, signal.SIGTERM)
