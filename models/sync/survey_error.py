@@ -39,7 +39,7 @@ from scipy.linalg import orth
 from scipy.optimize import brentq
 from scipy.stats import chi2
 
-#: The fewest kept arrivals of one sync tag at one receiver whose median residual is a pair.
+#: The fewest arrivals of one sync tag at one receiver whose median residual is a pair.
 MIN_PAIR_ARRIVALS = 10
 #: A pair whose projected median residual squared passes this many times its variance under the robust fit is set
 #: aside before the moments (χ²(1)'s 99.9 % quantile: a reflection lengthening one pair's path, not a position).
