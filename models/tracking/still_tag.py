@@ -37,18 +37,20 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
 
 def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
                         speed_sigma: float | None, sigma_toa: float | np.ndarray = SIGMA_TOA,
-                        clock_sigma: np.ndarray | None = None) -> np.ndarray | None:
+                        clock_sigma: np.ndarray | None = None, sensitivity: np.ndarray | None = None
+                        ) -> np.ndarray | None:
     """A stationary tag's pooled position's consider covariance (dim, dim) [m²] of the errors pooling does not
     average: the receivers' survey ``survey`` (n,) [m per axis], the sound speed's ``speed_sigma`` [m/s] and the
     receivers' clock offsets' ``clock_sigma`` (n,) [s] (a synchronisation's own uncertainty of each receiver's offset,
     NaN where not known: taken as 0), each a constant bias of one receiver's arrivals
-    (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`); None where none is known."""
+    (:func:`~sblsim.models.tracking.stationary.bias_sensitivity`, or ``sensitivity`` where already made); None where
+    none is known."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     clock = None if clock_sigma is None else np.nan_to_num(np.asarray(clock_sigma, float), nan=0.0)
     if survey is None and not speed_sigma and (clock is None or not clock.any()):
         return None
-    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
+    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled) if sensitivity is None else sensitivity
     B = np.zeros((len(positions), len(positions)))
     if survey is not None:  # a still tag's range to receiver i is off by u_i · δr_i, of variance σ_i² (|u_i| = 1)
         B += np.diag(np.asarray(survey, float) ** 2 / c**2)
@@ -61,7 +63,7 @@ def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled
 
 
 def survey_gains(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
-                 sigma_toa: float | np.ndarray = SIGMA_TOA) -> np.ndarray:
+                 sigma_toa: float | np.ndarray = SIGMA_TOA, sensitivity: np.ndarray | None = None) -> np.ndarray:
     """How each receiver's survey error moves a stationary tag's pooled position: ``G_i = ∂p / ∂δr_i`` (n, dim, 2)
     [m/m], ``δr_i`` the horizontal offset of receiver i's position as given from its true one.
 
@@ -73,10 +75,11 @@ def survey_gains(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
     k's surveyed position, itself off by the same ``δr_k``, errs by ``Σ_i G_i δr_i − δr_k``: its covariance has
     ``−σ_k² (G_k + G_kᵀ)`` besides (:func:`place_score`'s ``cross``): a tag heard near its own receiver moves with
     that receiver's position along their line (``G_k`` of rank about one, a third to two thirds along it on the
-    boats' reference tags), and that share of the receiver's error is no error of the score."""
+    boats' reference tags), and that share of the receiver's error is no error of the score. ``sensitivity``: the
+    ``S`` already made for this fit."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
-    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled)
+    S = bias_sensitivity(toa, positions, c, sigma_toa, pooled) if sensitivity is None else sensitivity
     diff = pooled.position[None, :] - positions
     unit = diff / np.maximum(np.linalg.norm(diff, axis=1), 1e-9)[:, None]
     return np.einsum("di,ij->idj", S, unit[:, :2]) / c
@@ -114,11 +117,16 @@ class StillTag:
 
 def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
     """One place of a still tag from the pings ``rows``: its pooled fit, the consider terms and the receivers' term
-    summed (dim, dim) [m²], and the receivers' term's DRMS [m]."""
+    summed (dim, dim) [m²], the receivers' term's DRMS [m] and the survey's gains (:func:`survey_gains`), the
+    consider terms and the gains from one bias sensitivity."""
+    from sblsim.models.tracking.stationary import bias_sensitivity
+
     pooled = stationary_track(toa[rows], positions, c, fixes[rows], sigma_toa)
-    held = stationary_consider(toa[rows], positions, c, pooled, survey, speed_sigma, sigma_toa, clock_sigma)
+    S = bias_sensitivity(toa[rows], positions, c, sigma_toa, pooled)
+    held = stationary_consider(toa[rows], positions, c, pooled, survey, speed_sigma, sigma_toa, clock_sigma, S)
     spread = receivers_term(toa[rows], positions, c, pooled, sigma_toa)
-    return pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread)))
+    gains = survey_gains(toa[rows], positions, c, pooled, sigma_toa, S)
+    return pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains
 
 
 def _rows(fit, rows: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -178,8 +186,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     stretches = np.asarray(speed.get("stretches_m_s") or [], float)
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
-    rows = placed = np.arange(m)  # the rows of the place scored (its first, where it moved)
-    pooled, extra, spread = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
+    rows = np.arange(m)
+    pooled, extra, spread, gains = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
     slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
@@ -195,14 +203,14 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if went and not verdict.throughout:  # the rows after the last still fix moved
         last = int(verdict.order[verdict.change - 1])
         after[last + 1:] = True
-        placed = rows[:last + 1]
-        pooled, extra, spread = _place(toa, positions, c, fx, placed, sigma_toa, survey, speed_sigma, clock_sigma)
+        pooled, extra, spread, gains = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma,
+                                              clock_sigma)
         emissions[:], kept[:] = _rows(pooled, rows[:last + 1], m)
         places[:last + 1], own[:last + 1], held[:last + 1] = pooled.position, pooled.covariance, extra
         first = int(verdict.order[verdict.change])
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
         try:  # where it went: the pooled fit of the rows after
-            gone, gone_extra, _ = _place(toa, positions, c, fx, rows[last + 1:], sigma_toa, survey, speed_sigma,
+            gone, gone_extra, _, _ = _place(toa, positions, c, fx, rows[last + 1:], sigma_toa, survey, speed_sigma,
                                          clock_sigma)
         except ModelError:  # too few receivers heard it there: its fixes' median
             change |= {"second_place": np.nanmedian(fx[last + 1:], axis=0).tolist(), "second_place_sigma_m": None}
@@ -224,7 +232,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
                "receivers_jackknife_m": spread, "change": change,
                "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),
-               "survey_gains": survey_gains(toa[placed], positions, c, pooled, sigma_toa).tolist()}
+               "survey_gains": gains.tolist()}
     return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp],
                     {"still": summary, "moved": bool(went),
                      "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),

@@ -48,14 +48,14 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
     home = dict(zip(sync_tags["tag"].astype(str), sync_tags["receiver"].astype(str)))
     names = receivers["receiver"].astype(str).tolist()
     index = {n: i for i, n in enumerate(names)}
-    table = table[table["tag"].map(home).isin(index) & table["receiver"].isin(index)]
-    table = table[table["tag"].map(home) != table["receiver"]]
+    own = table["tag"].map(home)
+    table, own = (t[own.isin(index) & table["receiver"].isin(index) & (own != table["receiver"])] for t in (table, own))
     if not len(table):
         return None
     tags = {t: i for i, t in enumerate(sorted(set(table["tag"])))}
     return survey_error(table["median"].to_numpy(float), table["count"].to_numpy(float),
                         table["scale"].to_numpy(float), table["receiver"].map(index).to_numpy(int),
-                        table["tag"].map(home).map(index).to_numpy(int), table["tag"].map(tags).to_numpy(int),
+                        own.map(index).to_numpy(int), table["tag"].map(tags).to_numpy(int),
                         receivers[["x", "y"]].to_numpy(float))
 
 

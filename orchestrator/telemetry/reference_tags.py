@@ -372,7 +372,7 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         r["survey_sigma_m"] = _each(stated, r["receiver"])
     array = None
     if paired is not None and refs:  # the same figure at every receiver: its median
-        values = [persistent_residual(paired, r) for r in synced.residuals["receiver"].astype(str).unique()]
+        values = [persistent_residual(paired, r) for r in paired["receiver"].unique()]
         array = float(np.nanmedian(values)) if np.isfinite(values).any() else None
     return {"tags": refs + loo, "reference": _pooled_references(refs, terms), "sync_left_out": _pooled_sync(loo),
             "still": _pooled_still(refs + loo), "not_scored": missing, "array_persistent_m": array, "notes": notes}
