@@ -8,8 +8,10 @@ incoherent transmission loss (M. Porter, through the ``pelagic`` package, a test
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
+from bisect import bisect_right
 
 import casadi as ca
 import numpy as np
@@ -131,14 +133,16 @@ def test_the_vertical_limit_is_continuous():
 def _ivp(table, zs, x, theta0, depth):
     """Integrate dz/dr = tan θ, dθ/dr = −c'(z)/c in range from depth ``zs`` at launch angle ``theta0`` [rad],
     reflecting at 0 and ``depth``: (z, θ) at ``x`` and the boundaries hit (0 surface, 1 bottom)."""
-    zt, ct = table[:, 0], table[:, 1]
-    slopes = np.diff(ct) / np.diff(zt)
+    # the table as Python floats, and each layer's gradient: the right-hand side runs millions of times, on scalars
+    zt, ct = [float(v) for v in table[:, 0]], [float(v) for v in table[:, 1]]
+    slopes = [(ct[k + 1] - ct[k]) / (zt[k + 1] - zt[k]) for k in range(len(zt) - 1)]
+    last = len(zt) - 2
 
     def rhs(r, y):
-        z, th = y
-        k = int(np.clip(np.searchsorted(zt, z, side="right") - 1, 0, len(zt) - 2))
+        z, th = float(y[0]), float(y[1])
+        k = min(max(bisect_right(zt, z) - 1, 0), last)
         g = 0.0 if (z < zt[0] or z > zt[-1]) else slopes[k]
-        return [np.tan(th), -g / (ct[k] + slopes[k] * (np.clip(z, zt[0], zt[-1]) - zt[k]))]
+        return [math.tan(th), -g / (ct[k] + slopes[k] * (min(max(z, zt[0]), zt[-1]) - zt[k]))]
 
     def top(r, y):
         return y[0]
