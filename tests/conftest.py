@@ -17,6 +17,13 @@ from pathlib import Path
 
 import pytest
 
+# One BLAS thread per process, set before numpy loads (in this process, its pytest-xdist workers and every command
+# the tests start, which inherit it): on 2 cores with 2 workers busy, OpenBLAS's second thread in each process spun
+# for the core the other worker needed. The 20 seeds' sync test took 161 s with the default and 74 s with one thread
+# on the same loaded cores; the benchmarks set the same (benchmarks/bench_sync_scale.py).
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
 #: The units of work that take longest (measured with ``--durations``, docs/architecture.md), longest first: they
 #: start first. A file's tests and a group's keep their order; the other units follow in collection order, and
 #: the documentation site's build from the page runs' figures comes last (it waits for the page chains).

@@ -145,8 +145,10 @@ def simulated(tmp_path_factory):
                                                                              "deployments.csv", False),
                                     ("off refined", folder / "off" / "deployments.csv", True),
                                     ("right refined", files["deployments"], True)):
+        # written (positions.csv, the report) where refined; the others, only compared, stay in memory
+        out = folder / name.replace(" ", "_") if refine else None
         runs[name] = sblsim.track(files["detections"], receivers=receivers, tags=files["tags"], workers=2,
-                                  refine_positions=refine, out=folder / name.replace(" ", "_"))
+                                  refine_positions=refine, out=out)
         check_tag_rows(runs[name].tags, runs[name].tracks, [str(p) for p in files.values()])
     return sim, true, errors, runs, folder
 
@@ -209,9 +211,9 @@ def test_with_a_measured_sound_speed_the_arrays_scale_is_found_too(simulated, tm
     sheet.assign(deploy_lat=lat, deploy_long=lon).to_csv(tmp_path / "deployments.csv", index=False)
     given = {"sound_speed": 1480.0, "workers": 2}
     right = sblsim.track(folder / "in" / "detections.csv", receivers=folder / "in" / "deployments.csv",
-                         tags=folder / "in" / "tags.csv", out=tmp_path / "right", **given)
+                         tags=folder / "in" / "tags.csv", **given)
     refined = sblsim.track(folder / "in" / "detections.csv", receivers=tmp_path / "deployments.csv",
-                           tags=folder / "in" / "tags.csv", refine_positions=True, out=tmp_path / "refined", **given)
+                           tags=folder / "in" / "tags.csv", refine_positions=True, **given)
     assert _rms(sim, refined) <= 1.1 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))
     assert not refined.summary["positions"]["sound_speed"]["fitted"]
 
@@ -229,10 +231,9 @@ def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
                                                           for t in sim.deployments["transmitter"]])
     sim.detections = sim.detections[~sim.detections["transmitter"].isin(dropped)].reset_index(drop=True)
     files, _, _ = _written_off(sim, tmp_path, 1004)
-    right = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=2,
-                         out=tmp_path / "right")
+    right = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=2)
     refined = sblsim.track(files["detections"], receivers=tmp_path / "off" / "deployments.csv", tags=files["tags"],
-                           workers=2, refine_positions=True, out=tmp_path / "refined")
+                           workers=2, refine_positions=True)
     summary = refined.summary["positions"]
     assert summary["kept"] and summary["clock_offset_knots"] == 7, summary
     assert _rms(sim, refined) <= 2.5 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))

@@ -4,6 +4,7 @@ every ping type consistent with its own covariance and near its PCRB; a track st
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,21 @@ from sblsim.orchestrator.readers.toa_matrix import read_toa
 from sblsim.orchestrator.tracks import variants
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
+
+
+@pytest.fixture
+def robust_only(monkeypatch):
+    """``sblsim.replay_toa`` and ``sblsim replay`` without the causal filters run beside for comparison (the
+    sequential EKF and the UKF, half of a track's time; ``other_filters=False``, as a study tracks its tags): what
+    these tests check, the robust track, its quality, score and bound, the EKF, RTS and fixes, is unchanged (on
+    Lake Hald with half of the detections removed: the same frames and figures), only ``score["others"]`` and the
+    summary's ``fixed`` and ``flagged`` are without the two filters."""
+    from sblsim.orchestrator.commands import replay as replay_command
+    from sblsim.orchestrator.tracks import replay, track
+
+    robust = functools.partial(track.track, other_filters=False)
+    monkeypatch.setattr(replay, "track", robust)
+    monkeypatch.setattr(replay_command, "track", robust)
 
 
 def test_random_interval_pings_are_a_uniform_draw_apart():
@@ -63,6 +79,7 @@ def scored(result) -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 @pytest.mark.parametrize("low,high,median,rms,p95", [(20.0, 40.0, 0.25, 2.0, 5.0), (5.0, 15.0, 0.25, 2.0, 5.0)],
                          ids=["U(20,40)", "U(5,15)"])
 def test_lake_hald_at_a_random_burst_interval(tmp_path, low, high, median, rms, p95):
@@ -78,6 +95,7 @@ def test_lake_hald_at_a_random_burst_interval(tmp_path, low, high, median, rms, 
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_with_ten_minutes_cut_out(tmp_path):
     """Ten minutes from the middle of the track removed (rows absent): one gap, two segments, the issue's targets
     (median 0.22, RMS 1, 95 % 1.1 m; before the schedule: 64 km RMS)."""
@@ -103,6 +121,7 @@ def _at_depths(tmp_path: Path, seed: int = 1) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_with_receiver_depths_and_a_2d_truth(tmp_path):
     """The documented input a 3-D array with a 2-D truth (a traceback before): the track within 1.5 times the full
     2-D track's figures (median 0.20, RMS 0.62, 95 % 0.95 m); its bound has a row per ping. Receivers 1-5 m deep do
@@ -116,6 +135,7 @@ def test_lake_hald_with_receiver_depths_and_a_2d_truth(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_the_8_hydrophones_at_depths_take_the_depth_with_a_prior(tmp_path):
     """The authors' 8 hydrophones moored at depths U(1, 5) m (seed 2; the rule was set on seed 1 and on
     simulations): the depth taken with a prior; the 8 hydrophones' targets (median 0.45 m with 10 % slack, RMS 2,
@@ -130,6 +150,7 @@ def test_the_8_hydrophones_at_depths_take_the_depth_with_a_prior(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_a_random_interval_on_the_8_hydrophones_at_depths_calibrates_with_the_depth_prior(tmp_path, monkeypatch):
     """U(20, 40) s (seed 1) on the 8 hydrophones at depths U(1, 5) m: the calibration made with the depth held (the
     receivers lie in one plane; it fitted each ping's depth freely before: 1,395 m/s) is within 3 of its standard
@@ -162,6 +183,7 @@ def test_a_random_interval_on_the_8_hydrophones_at_depths_calibrates_with_the_de
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 @pytest.mark.parametrize("case", ["8 hydrophones", "50 % removed"])
 def test_lake_hald_thinned_with_the_sound_speed_it_calibrates_itself(case):
     """The authors' 8 hydrophones and half of the detections removed (seed 1), each calibrating its own sound speed
@@ -181,6 +203,7 @@ def test_lake_hald_thinned_with_the_sound_speed_it_calibrates_itself(case):
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_the_fallback(tmp_path, capsys):
     """The pings kept at U(20, 40) s (seed 1) on the authors' 8 hydrophones: their stretches give the speed to 5.6
     m/s only, above the 5 m/s the calibration accepts alone. It was thrown away for the default 1,500 m/s (83 m/s
@@ -208,6 +231,7 @@ def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_the_fixes_spliced_in_bring_a_thin_random_interval_track_out_of_a_wrong_minimum(tmp_path, monkeypatch):
     """U(20, 40) s (seed 1) on the authors' 8 hydrophones: without the fixes spliced in (:data:`SPLICE_ROUNDS` 0) the
     robust smoother stayed where a stretch weighs down most of its arrivals (1,127 against 772, 17.9 m RMS); with
@@ -404,6 +428,7 @@ def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys)
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_receivers_surveyed_to_1_m_with_their_survey_error(tmp_path):
     """The hydrophones moved by 1 m per axis (seed 1), as a survey to 1 m gives them: the track the same with or
     without --survey-sigma 1 (the positions as surveyed either way), its NEES against the GPS from far above 3 to
