@@ -167,11 +167,22 @@ def cell_corners(values) -> list[np.ndarray]:
     return [v[i:i + a, j:j + b, k:k + c] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 
 
+def _axes(bounds) -> list[np.ndarray]:
+    """The grid's three axes [m] (source depth, receiver depth, horizontal distance) over ``bounds`` (6,)."""
+    return np.split(ray_grid(np.asarray(bounds, dtype=float)), np.cumsum(RAY_GRID)[:-1])
+
+
+def node_points(bounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Source depth, receiver depth and horizontal distance [m] of every node of the grid of ``bounds`` (6,), each
+    (RAY_TABLE_ROWS,), the source depth fastest (:func:`ray_grid`'s meshgrid in Fortran order): where the table's
+    builder solves."""
+    return tuple(a.ravel(order="F") for a in np.meshgrid(*_axes(bounds), indexing="ij"))
+
+
 def cell_centres(bounds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Source depth, receiver depth and horizontal distance [m] of the centre of every cell of the grid of
     ``bounds`` (6,), each (cells,), in the order of :func:`cell_corners`' arrays raveled in Fortran order."""
-    axes = np.split(ray_grid(np.asarray(bounds, dtype=float)), np.cumsum(RAY_GRID)[:-1])
-    centres = [0.5 * (a[:-1] + a[1:]) for a in axes]
+    centres = [0.5 * (a[:-1] + a[1:]) for a in _axes(bounds)]
     return tuple(a.ravel(order="F") for a in np.meshgrid(*centres, indexing="ij"))
 
 
@@ -223,8 +234,7 @@ def eigenray_table(table, depth: float, bounds, exact: ca.Function | None = None
     exact = exact_points() if exact is None else exact
     bounds = np.asarray(bounds, dtype=float)
     grid = ray_grid(bounds)
-    axes = np.split(grid, np.cumsum(RAY_GRID)[:-1])
-    zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
+    zs, zr, x = node_points(bounds)
     tau, launch, arrival, kind = _at_points(exact, (zs, zr, x, depth), (nodes, speeds))
     length, l0, a0 = _at_points(_image_function(), (kind, zs, zr, x, depth))
     c_source = np.interp(zs, nodes, speeds)
@@ -418,8 +428,7 @@ def family_nodes(table, depth: float, bounds, paths: ca.Function | None = None) 
     """
     nodes, speeds = profile_arrays(table)
     paths = family_points() if paths is None else paths
-    axes = np.split(ray_grid(np.asarray(bounds, dtype=float)), np.cumsum(RAY_GRID)[:-1])
-    zs, zr, x = (a.ravel(order="F") for a in np.meshgrid(*axes, indexing="ij"))
+    zs, zr, x = node_points(bounds)
     n = zs.size
     tau, launch, arrival, valid, spreading, length = (
         np.asarray(o) for o in paths.map(n)(zs[None, :], zr[None, :], x[None, :], np.full((1, n), depth),
@@ -442,4 +451,5 @@ def family_nodes(table, depth: float, bounds, paths: ca.Function | None = None) 
 
 __all__ = ["FAMILIES", "FAMILY_COLUMNS", "FAMILY_TABLE", "RAY_BOUNDS", "RAY_GRID", "RAY_TABLE", "RAY_TABLE_ROWS",
            "RAY_TABLE_TOLERANCE", "arrivals_grid", "cell_centres", "cell_corners", "eigenray_table", "exact_nodes",
-           "exact_points", "family_nodes", "family_points", "first_arrival_grid", "ray_grid", "ray_values"]
+           "exact_points", "family_nodes", "family_points", "first_arrival_grid", "node_points", "ray_grid",
+           "ray_values"]

@@ -541,10 +541,12 @@ def _grid_function(table, depth, bounds, columns):
     return f
 
 
-def _exact_points(table, depth, zs, zr, x):
+def _exact_points(table, depth, zs, zr, x, exact=None):
+    """The exact solve (``exact``: casadi's own :func:`~sblsim.models.acoustics.ray_tables.exact_points` unless a
+    compiled one is given) at the points: (τ, launch, arrival, kind), each (n,)."""
     nodes, speeds = rays.profile_arrays(table)
-    return [np.asarray(o).ravel() for o in ray_tables.exact_points().map(zs.size)(zs[None], zr[None], x[None], depth,
-                                                                          nodes, speeds)]
+    exact = ray_tables.exact_points() if exact is None else exact
+    return [np.asarray(o).ravel() for o in exact.map(zs.size)(zs[None], zr[None], x[None], depth, nodes, speeds)]
 
 
 def _tabulated(columns, bounds, zs, zr, x, flag="ray_exact"):
@@ -657,12 +659,7 @@ def test_the_compiled_builder_is_the_model(name, depth, bounds):
     if compiled is None:
         pytest.skip("no C compiler")
     table = munk_table() if name == "munk" else ISO
-    nodes, speeds = rays.profile_arrays(table)
-    grid = ray_tables.ray_grid(np.asarray(bounds, dtype=float))
-    axes = np.split(grid, np.cumsum(ray_tables.RAY_GRID)[:-1])
-    points = [np.r_[a.ravel(order="F"), b] for a, b in zip(np.meshgrid(*axes, indexing="ij"),
-                                                            ray_tables.cell_centres(bounds))]
+    points = [np.r_[a, b] for a, b in zip(ray_tables.node_points(bounds), ray_tables.cell_centres(bounds))]
     zs, zr, x = (p[::BUILDER_STRIDE] for p in points)
-    got = [np.asarray(o).ravel() for o in compiled.map(zs.size)(zs[None], zr[None], x[None], depth, nodes, speeds)]
-    for g, w in zip(got, _exact_points(table, depth, zs, zr, x)):
+    for g, w in zip(_exact_points(table, depth, zs, zr, x, compiled), _exact_points(table, depth, zs, zr, x)):
         np.testing.assert_array_equal(g, w)
