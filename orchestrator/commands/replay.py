@@ -129,6 +129,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force-interval", action="store_true",
                    help="take the stated --burst-interval or --burst-sequence where the detections contradict it as "
                         "a whole (refused otherwise); a warning says how much it sets aside")
+    p.add_argument("--no-other-filters", dest="other_filters", action="store_false",
+                   help="--format toa: without the sequential EKF and the UKF run beside for comparison (the track "
+                        "and the EKF's, the smoothers' and the fixes' rows the same, in about half the time)")
     p.add_argument("--acceleration-psd", type=float, default=None, metavar="M2_S3",
                    help="--format toa: the motion model's white-noise acceleration [m²/s³] in (0, 1] (default: "
                         "estimated from the pings by EM)")

@@ -10,14 +10,16 @@ import argparse
 from typing import Any
 
 from sblsim.models.errors import ConfigError
-from sblsim.orchestrator.tracks.options import TOA_OPTIONS, option_spelling, toa_options
+from sblsim.orchestrator.tracks.options import NEGATED, TOA_OPTIONS, option_spelling, toa_options
 
 #: The options of ``--format toa`` (times of arrival) a log refuses, in the order the refusal names the first given;
-#: :data:`NUMBERS` are given when set (0 too), the others when true (a flag, a file, a text, a number other than 0).
+#: :data:`NUMBERS` are given when set (0 too), :data:`~sblsim.orchestrator.tracks.options.NEGATED` when false
+#: (``--no-other-filters``), the others when true (a flag, a file, a text, a number other than 0).
 TOA_ONLY = ("receivers", "reference", "smooth", "sound_speed", "receivers_kept", "drop_detections", "seed",
             "truth_sigma", "ping_type", "burst_interval", "burst_sequence", "force_interval", "acceleration_psd",
             "sound_speed_file", "temperature", "salinity", "motion", "temperature_file", "water_depth", "workers",
-            "scheduler", "tag_depth", "depth_sigma", "survey_sigma", "toa_sigma", "crs", "frame", "time_origin")
+            "scheduler", "tag_depth", "depth_sigma", "survey_sigma", "toa_sigma", "crs", "frame", "time_origin",
+            "other_filters")
 NUMBERS = {"seed", "truth_sigma", "acceleration_psd", "temperature", "salinity", "water_depth", "workers", "tag_depth",
            "depth_sigma", "survey_sigma", "toa_sigma"}
 
@@ -31,7 +33,8 @@ def refuse_toa_only(args: argparse.Namespace) -> None:
         Naming the first given, and the options a log takes.
     """
     given = [option_spelling(k) for k in TOA_ONLY
-             if (getattr(args, k) is not None if k in NUMBERS else getattr(args, k))]
+             if (getattr(args, k) is not None if k in NUMBERS else not getattr(args, k) if k in NEGATED
+                 else getattr(args, k))]
     if given:
         raise ConfigError(f"{given[0]}: only with --format toa (times of arrival); allowed for a log: --receiver, "
                           "--config, --truth, --engine, --set, --fmu-dir, --out, --force")
@@ -60,7 +63,8 @@ def toa_arguments(args: argparse.Namespace) -> dict[str, Any]:
                           "--force-interval, "
                           "--acceleration-psd, --sound-speed-file, --temperature, --salinity, --temperature-file, "
                           "--motion, --workers, --scheduler, --tag-depth, --depth-sigma, --survey-sigma, "
-                          "--water-depth, --toa-sigma, --crs, --frame, --time-origin, --out, --force")
+                          "--water-depth, --toa-sigma, --crs, --frame, --time-origin, --no-other-filters, --out, "
+                          "--force")
     if args.truth_sigma is not None and args.truth is None:
         raise ConfigError("--truth-sigma: only with --truth (the truth's own error in the NEES against it)")
     unset = {"drop_detections": 0.0, "seed": 0, "truth_sigma": 0.0}  # the defaults of options not given

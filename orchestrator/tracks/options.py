@@ -272,7 +272,7 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
                 temperature: Any = None, salinity: Any = None, motion: Any = "moving", tag_depth: Any = None,
                 depth_sigma: Any = None, survey_sigma: Any = None, crs: Any = None, frame: Any = None,
                 time_origin: Any = None, toa_sigma: Any = None, temperature_file: Any = None,
-                water_depth: Any = None, force_interval: Any = False, *,
+                water_depth: Any = None, force_interval: Any = False, other_filters: Any = True, *,
                 spell: Callable[[str], str] | None = None) -> dict[str, Any]:
     """:func:`~sblsim.orchestrator.tracks.replay.replay_toa`'s tracking arguments checked, as keyword arguments of
     :func:`~sblsim.orchestrator.tracks.track.track`; ``spell`` names an argument in a refusal as the caller spells
@@ -301,7 +301,8 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
             "truth_sigma": truth_sigma, "ping_type": kind, "burst_interval": interval, "burst_sequence_path": sequence,
             "acceleration_psd": acceleration_psd, "sound_speed_path": series, "temperature": temperature,
             "salinity": salinity, "motion": motion, "toa_sigma": toa_sigma_argument(toa_sigma, n("toa_sigma")),
-            "force_interval": flag_argument(force_interval, n("force_interval"))} | geometry_arguments(
+            "force_interval": flag_argument(force_interval, n("force_interval")),
+            "other_filters": flag_argument(other_filters, n("other_filters"))} | geometry_arguments(
         tag_depth, depth_sigma, survey_sigma, (n("tag_depth"), n("depth_sigma"), n("survey_sigma"))) | place_arguments(
         crs, frame, time_origin, (n("crs"), n("frame"), n("time_origin"))) | water_arguments(
         temperature_file, water_depth, (n("temperature_file"), n("water_depth")))
@@ -311,6 +312,11 @@ def toa_options(smooth: Any = True, sound_speed: Any = None, receivers_kept: Any
 TOA_OPTIONS = tuple(k for k in inspect.signature(toa_options).parameters if k != "spell")
 
 
+#: The tracking arguments true by default, which the command line turns off: ``--no-other-filters``.
+NEGATED = ("other_filters",)
+
+
 def option_spelling(name: str) -> str:
-    """A tracking argument as the command line spells it: ``--sound-speed`` for ``sound_speed``."""
-    return "--" + name.replace("_", "-")
+    """A tracking argument as the command line spells it: ``--sound-speed`` for ``sound_speed``,
+    ``--no-other-filters`` for ``other_filters`` (:data:`NEGATED`)."""
+    return ("--no-" if name in NEGATED else "--") + name.replace("_", "-")

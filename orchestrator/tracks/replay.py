@@ -73,8 +73,8 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
                tag_depth: float | None = None, depth_sigma: float | None = None, survey_sigma: float | None = None,
                crs: str | None = None, frame: str | None = None, time_origin: str | float | None = None,
                toa_sigma: float | None = None, temperature_file: str | Path | None = None,
-               water_depth: float | None = None, force_interval: bool = False, out: str | Path | None = None,
-               force: bool = False) -> TrackResult:
+               water_depth: float | None = None, force_interval: bool = False, other_filters: bool = True,
+               out: str | Path | None = None, force: bool = False) -> TrackResult:
     """Track a pinger from recorded times of arrival at a fixed array (an inverted LBL): ``sblsim replay TOA_FILE
     --format toa`` (docs/tracking.md).
 
@@ -165,6 +165,11 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
         Take the stated ``burst_interval`` (or ``burst_sequence``) where the rows contradict it as a whole (more than
         10 % of them set aside as no pings; refused otherwise); ``summary["set_aside"]["warning"]`` says how much it
         sets aside.
+    other_filters : bool
+        Run the causal filters beside the EKF for comparison (the sequential EKF and the UKF: their rows in
+        ``estimates.csv``, their scores in ``score["others"]``, their fixes in ``summary["fixed"]``); False leaves them
+        out, as a study tracks its tags: the track, the EKF's, the RTS and the robust smoother's rows and the fixes
+        are the same, in about half the time.
     out : str or Path, optional
         Write ``track.csv``, ``estimates.csv``, ``summary.json``, ``track.png``, with a truth ``score.json`` and
         ``errors.csv``, and ``set_aside.csv`` (the rows a stated interval set aside) there.
@@ -189,7 +194,7 @@ def replay_toa(toa: str | Path, *, receivers: str | Path, truth: str | Path | No
     options = toa_options(smooth, sound_speed, receivers_kept, drop_detections, seed, truth_sigma, ping_type,
                           burst_interval, burst_sequence, acceleration_psd, sound_speed_file, temperature, salinity,
                           motion, tag_depth, depth_sigma, survey_sigma, crs, frame, time_origin, toa_sigma,
-                          temperature_file, water_depth, force_interval)
+                          temperature_file, water_depth, force_interval, other_filters)
     check_depth_sigma(toa, tag_depth, depth_sigma, ("tag_depth", "depth_sigma"))
     outcome = track(toa, receivers, truth, reference, **options)
     check_positioned(outcome, toa)

@@ -4,7 +4,6 @@ every ping type consistent with its own covariance and near its PCRB; a track st
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import numpy as np
@@ -22,19 +21,11 @@ from sblsim.orchestrator.tracks import variants
 DATA = Path(__file__).resolve().parents[2] / "data" / "lake-hald"
 
 
-@pytest.fixture
-def robust_only(monkeypatch):
-    """``sblsim.replay_toa`` and ``sblsim replay`` without the causal filters run beside for comparison (the
-    sequential EKF and the UKF, half of a track's time; ``other_filters=False``, as a study tracks its tags): what
-    these tests check, the robust track, its quality, score and bound, the EKF, RTS and fixes, is unchanged (on
-    Lake Hald with half of the detections removed: the same frames and figures), only ``score["others"]`` and the
-    summary's ``fixed`` and ``flagged`` are without the two filters."""
-    from sblsim.orchestrator.commands import replay as replay_command
-    from sblsim.orchestrator.tracks import replay, track
-
-    robust = functools.partial(track.track, other_filters=False)
-    monkeypatch.setattr(replay, "track", robust)
-    monkeypatch.setattr(replay_command, "track", robust)
+#: ``sblsim.replay_toa`` without the causal filters run beside for comparison (the sequential EKF and the UKF, half
+#: of a track's time; ``--no-other-filters``, as a study tracks its tags): what these tests check, the robust track,
+#: its quality, score and bound, the EKF, RTS and fixes, is the same with them
+#: (:func:`test_the_other_filters_left_out_leave_the_track_as_it_is`).
+ROBUST = {"other_filters": False}
 
 
 def test_random_interval_pings_are_a_uniform_draw_apart():
@@ -79,7 +70,42 @@ def scored(result) -> dict:
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
+def test_the_other_filters_left_out_leave_the_track_as_it_is(tmp_path):
+    """Lake Hald's first 100 pings with and without the comparison filters (``other_filters``): the track, and the
+    robust, RTS, EKF and fixes' rows and errors, the same to the last bit; the sequential EKF's and the UKF's rows,
+    scores and counts there only with them."""
+    path = lake_hald(tmp_path, "first", np.arange(100))
+    both, robust = (sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
+                                      sound_speed=1420.0, other_filters=kept) for kept in (True, False))
+    others = {"ekf-seq", "ukf"}
+    assert set(both.estimates["estimator"]) == {"robust", "rts", "ekf", "fix"} | others
+    assert set(robust.estimates["estimator"]) == {"robust", "rts", "ekf", "fix"}
+    assert both.track.equals(robust.track)
+    for table in ("estimates", "errors"):
+        whole = getattr(both, table)
+        assert whole[~whole["estimator"].isin(others)].reset_index(drop=True).equals(getattr(robust, table))
+    assert others <= set(both.score["others"]) and not others & set(robust.score["others"])
+    assert {k: v for k, v in both.summary["fixed"].items() if k not in others} == robust.summary["fixed"]
+
+
+def test_no_other_filters_on_the_command_line(tmp_path, capsys):
+    """``--no-other-filters`` reaches the tracking options as ``other_filters`` False (True without it), and a
+    receiver's log, which has no such filters, refuses it in one line and writes nothing."""
+    from sblsim.orchestrator.cli import _parser, main
+    from sblsim.orchestrator.tracks.format_options import toa_arguments
+
+    base = ["replay", str(DATA / "toa.txt"), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv")]
+    assert toa_arguments(_parser().parse_args(base))["other_filters"] is True
+    assert toa_arguments(_parser().parse_args([*base, "--no-other-filters"]))["other_filters"] is False
+    log = tmp_path / "log.csv"
+    log.write_text("time_s\n0.0\n")
+    assert main(["replay", str(log), "--no-other-filters", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sblsim: error: --no-other-filters: only with --format toa"), err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("low,high,median,rms,p95", [(20.0, 40.0, 0.25, 2.0, 5.0), (5.0, 15.0, 0.25, 2.0, 5.0)],
                          ids=["U(20,40)", "U(5,15)"])
 def test_lake_hald_at_a_random_burst_interval(tmp_path, low, high, median, rms, p95):
@@ -87,7 +113,7 @@ def test_lake_hald_at_a_random_burst_interval(tmp_path, low, high, median, rms, 
     m median, 5-9 m RMS, 8-21 m at 95 %), no row 10 m off the GPS left unflagged."""
     toa = read_toa(DATA / "toa.txt").toa
     path = lake_hald(tmp_path, "rbi", variants.random_interval_pings(toa, low, high, seed=1))
-    result = sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt")
+    result = sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt", **ROBUST)
     assert result.summary["ping_type"]["type"] == "rbi" and result.summary["ping_type"]["source"] == "inferred"
     figures = scored(result)
     assert figures["median"] <= median and figures["rms"] <= rms and figures["p95"] <= p95, figures
@@ -95,14 +121,13 @@ def test_lake_hald_at_a_random_burst_interval(tmp_path, low, high, median, rms, 
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_with_ten_minutes_cut_out(tmp_path):
     """Ten minutes from the middle of the track removed (rows absent): one gap, two segments, the issue's targets
     (median 0.22, RMS 1, 95 % 1.1 m; before the schedule: 64 km RMS)."""
     toa = read_toa(DATA / "toa.txt").toa
     first = ps.first_arrivals(toa)
     path = lake_hald(tmp_path, "gap", variants.cut_gap(toa, float(np.nanmedian(first)), 600.0))
-    result = sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt")
+    result = sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt", **ROBUST)
     assert len(result.summary["segments"]) == 2 and 590.0 < result.summary["gaps_s"][0] < 615.0
     figures = scored(result)
     assert figures["median"] <= 0.22 and figures["rms"] <= 1.0 and figures["p95"] <= 1.1, figures
@@ -121,12 +146,12 @@ def _at_depths(tmp_path: Path, seed: int = 1) -> Path:
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_with_receiver_depths_and_a_2d_truth(tmp_path):
     """The documented input a 3-D array with a 2-D truth (a traceback before): the track within 1.5 times the full
     2-D track's figures (median 0.20, RMS 0.62, 95 % 0.95 m); its bound has a row per ping. Receivers 1-5 m deep do
     not determine the depth of a pinger among them: it is taken with a prior (models/tracking/depth.py)."""
-    result = sblsim.replay_toa(DATA / "toa.txt", receivers=_at_depths(tmp_path), truth=DATA / "gps.txt")
+    result = sblsim.replay_toa(DATA / "toa.txt", receivers=_at_depths(tmp_path), truth=DATA / "gps.txt",
+                               **ROBUST)
     assert result.summary["dimensions"] == 3 and len(result.bound) == 3244
     assert result.summary["depth"]["source"] == "prior (the arrivals do not determine it)"
     figures = scored(result)
@@ -135,14 +160,13 @@ def test_lake_hald_with_receiver_depths_and_a_2d_truth(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_the_8_hydrophones_at_depths_take_the_depth_with_a_prior(tmp_path):
     """The authors' 8 hydrophones moored at depths U(1, 5) m (seed 2; the rule was set on seed 1 and on
     simulations): the depth taken with a prior; the 8 hydrophones' targets (median 0.45 m with 10 % slack, RMS 2,
     95 % 4.5 m) and at most 3 rows more than 10 m from the GPS left ok (the 2-D track's reflection at pings 421-423,
     docs/tracking.md; with the depth estimated freely: 0.53 / 2.76 / 6.89 m and 62 such rows at seed 1)."""
     result = sblsim.replay_toa(DATA / "toa.txt", receivers=_at_depths(tmp_path, seed=2), truth=DATA / "gps.txt",
-                               receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23")
+                               receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23", **ROBUST)
     assert result.summary["depth"]["source"] == "prior (the arrivals do not determine it)"
     figures = scored(result)
     assert figures["median"] <= 0.5 and figures["rms"] <= 2.0 and figures["p95"] <= 4.5, figures
@@ -150,7 +174,6 @@ def test_the_8_hydrophones_at_depths_take_the_depth_with_a_prior(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_a_random_interval_on_the_8_hydrophones_at_depths_calibrates_with_the_depth_prior(tmp_path, monkeypatch):
     """U(20, 40) s (seed 1) on the 8 hydrophones at depths U(1, 5) m: the calibration made with the depth held (the
     receivers lie in one plane; it fitted each ping's depth freely before: 1,395 m/s) is within 3 of its standard
@@ -164,7 +187,7 @@ def test_a_random_interval_on_the_8_hydrophones_at_depths_calibrates_with_the_de
 
     def run():
         result = sblsim.replay_toa(path, receivers=receivers, truth=DATA / "gps.txt",
-                                   receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23")
+                                   receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23", **ROBUST)
         return result.summary, scored(result)
 
     summary, figures = run()
@@ -183,7 +206,6 @@ def test_a_random_interval_on_the_8_hydrophones_at_depths_calibrates_with_the_de
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 @pytest.mark.parametrize("case", ["8 hydrophones", "50 % removed"])
 def test_lake_hald_thinned_with_the_sound_speed_it_calibrates_itself(case):
     """The authors' 8 hydrophones and half of the detections removed (seed 1), each calibrating its own sound speed
@@ -193,7 +215,7 @@ def test_lake_hald_thinned_with_the_sound_speed_it_calibrates_itself(case):
     options = {"receivers_kept": "H2,H4,H6,H7,H11,H12,H17,H23"} if case == "8 hydrophones" else \
         {"drop_detections": 0.5, "seed": 1}
     result = sblsim.replay_toa(DATA / "toa.txt", receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
-                               **options)
+                               **options, **ROBUST)
     speed = result.summary["sound_speed"]
     assert abs(speed["sound_speed_m_s"] - 1416.9) <= 3 * speed["sigma_m_s"] + 0.5, speed
     figures = scored(result)
@@ -203,7 +225,6 @@ def test_lake_hald_thinned_with_the_sound_speed_it_calibrates_itself(case):
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_the_fallback(tmp_path, capsys):
     """The pings kept at U(20, 40) s (seed 1) on the authors' 8 hydrophones: their stretches give the speed to 5.6
     m/s only, above the 5 m/s the calibration accepts alone. It was thrown away for the default 1,500 m/s (83 m/s
@@ -218,8 +239,8 @@ def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_
     path = lake_hald(tmp_path, "rbi", variants.random_interval_pings(toa, 20.0, 40.0, seed=1))
     out = tmp_path / "out"
     assert main(["replay", str(path), "--format", "toa", "--receivers", str(DATA / "hydrophones.csv"), "--truth",
-                 str(DATA / "gps.txt"), "--receivers-kept", "H2,H4,H6,H7,H11,H12,H17,H23", "--smooth", "--out",
-                 str(out)]) == 0
+                 str(DATA / "gps.txt"), "--receivers-kept", "H2,H4,H6,H7,H11,H12,H17,H23", "--smooth",
+                 "--no-other-filters", "--out", str(out)]) == 0
 
     summary = json.loads((out / "summary.json").read_text())
     speed = summary["sound_speed"]
@@ -231,7 +252,6 @@ def test_a_random_interval_on_the_thin_array_combines_its_weak_calibration_with_
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_the_fixes_spliced_in_bring_a_thin_random_interval_track_out_of_a_wrong_minimum(tmp_path, monkeypatch):
     """U(20, 40) s (seed 1) on the authors' 8 hydrophones: without the fixes spliced in (:data:`SPLICE_ROUNDS` 0) the
     robust smoother stayed where a stretch weighs down most of its arrivals (1,127 against 772, 17.9 m RMS); with
@@ -243,7 +263,7 @@ def test_the_fixes_spliced_in_bring_a_thin_random_interval_track_out_of_a_wrong_
 
     def run():
         result = sblsim.replay_toa(path, receivers=DATA / "hydrophones.csv", truth=DATA / "gps.txt",
-                                   receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23")
+                                   receivers_kept="H2,H4,H6,H7,H11,H12,H17,H23", **ROBUST)
         errors = result.errors[result.errors["estimator"] == "robust"]["error_2d_m"]
         return result.summary["robust_smoother"]["cost"], errors
 
@@ -428,7 +448,6 @@ def test_two_pings_with_the_speed_given_are_tracked_and_scored(tmp_path, capsys)
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("robust_only")
 def test_lake_hald_receivers_surveyed_to_1_m_with_their_survey_error(tmp_path):
     """The hydrophones moved by 1 m per axis (seed 1), as a survey to 1 m gives them: the track the same with or
     without --survey-sigma 1 (the positions as surveyed either way), its NEES against the GPS from far above 3 to
@@ -442,7 +461,7 @@ def test_lake_hald_receivers_surveyed_to_1_m_with_their_survey_error(tmp_path):
         table.loc[placed, axis] += rng.normal(0.0, 1.0, placed.sum())
     table.to_csv(tmp_path / "hydrophones.csv", index=False)
     plain, surveyed = (sblsim.replay_toa(DATA / "toa.txt", receivers=tmp_path / "hydrophones.csv",
-                                         truth=DATA / "gps.txt", survey_sigma=sigma) for sigma in (None, 1.0))
+                                         truth=DATA / "gps.txt", survey_sigma=sigma, **ROBUST) for sigma in (None, 1.0))
     assert np.array_equal(plain.track[["x", "y"]].to_numpy(), surveyed.track[["x", "y"]].to_numpy())
     assert plain.score["nees"] > 10.0 and 1.0 <= surveyed.score["nees"] <= 3.0, (plain.score["nees"],
                                                                                   surveyed.score["nees"])
