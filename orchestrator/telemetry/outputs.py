@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import textwrap
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -58,17 +59,35 @@ def geojson(outcome: StudyOutcome) -> dict[str, Any] | None:
     return None if features is None else {"type": "FeatureCollection", "features": [plain(f) for f in features]}
 
 
-def _features(outcome: StudyOutcome) -> Iterator[dict[str, Any]] | None:
-    """:func:`geojson`'s features, a tag's track at a time; None where the positions have no CRS."""
+def _geo_table(outcome: StudyOutcome):
+    """The receivers used (``receivers.csv``'s rows with ``used``), or None where the positions have no CRS (no
+    GeoJSON)."""
     table = outcome.deployments.written()
     if "used" in table:
         table = table[table["used"].to_numpy(bool)]
     if outcome.deployments.frame is None or not np.isfinite(table["lat"].to_numpy(float)).all():
         return None
+    return table
+
+
+def _features(outcome: StudyOutcome) -> Iterator[dict[str, Any]] | None:
+    """:func:`geojson`'s features, a tag's track at a time; None where the positions have no CRS."""
+    table = _geo_table(outcome)
+    if table is None:
+        return None
     return _feature_rows(outcome, table)
 
 
 def _feature_rows(outcome: StudyOutcome, table) -> Iterator[dict[str, Any]]:
+    yield from _receiver_features(outcome, table)
+    for tag, rows in tag_tracks(outcome.tracks, outcome.parts):
+        feature = _track_feature(tag, rows)
+        if feature is not None:
+            yield feature
+
+
+def _receiver_features(outcome: StudyOutcome, table) -> Iterator[dict[str, Any]]:
+    """The receivers used as GeoJSON points (:func:`geojson`)."""
     by_receiver: dict[str, list[str]] = {}
     for tag, names in _heard(outcome).items():
         for name in names:
@@ -80,17 +99,20 @@ def _feature_rows(outcome: StudyOutcome, table) -> Iterator[dict[str, Any]]:
                                         "start_utc": row["start_utc"], "end_utc": row["end_utc"], "used": True,
                                         "detections": int(row.get("detections", 0)),
                                         "tags_tracked": ",".join(by_receiver.get(row["receiver"], []))}})
-    for tag, rows in tag_tracks(outcome.tracks, outcome.parts):
-        ok = rows[(rows["quality"] != "flagged") & rows["lat"].notna()]
-        if len(ok) < 2:
-            continue
-        yield ({"type": "Feature",
-                         "geometry": {"type": "LineString",
-                                      "coordinates": np.c_[ok["lon"].to_numpy(float), ok["lat"].to_numpy(float)]
-                                      .round(8).tolist()},
-                         "properties": {"kind": "track", "tag": tag, "rows": int(len(ok)),
-                                        "flagged_rows_left_out": int((rows["quality"] == "flagged").sum()),
-                                        "first_utc": ok["time_utc"].iloc[0], "last_utc": ok["time_utc"].iloc[-1]}})
+
+
+def _track_feature(tag: str, rows) -> dict[str, Any] | None:
+    """A tag's rows of ``tracks.csv`` not flagged as a GeoJSON line (:func:`geojson`); None with fewer than two."""
+    ok = rows[(rows["quality"] != "flagged") & rows["lat"].notna()]
+    if len(ok) < 2:
+        return None
+    return ({"type": "Feature",
+             "geometry": {"type": "LineString",
+                          "coordinates": np.c_[ok["lon"].to_numpy(float), ok["lat"].to_numpy(float)]
+                          .round(8).tolist()},
+             "properties": {"kind": "track", "tag": tag, "rows": int(len(ok)),
+                            "flagged_rows_left_out": int((rows["quality"] == "flagged").sum()),
+                            "first_utc": ok["time_utc"].iloc[0], "last_utc": ok["time_utc"].iloc[-1]}})
 
 
 def _short(reason: str) -> str:
@@ -188,14 +210,15 @@ def _used(outcome: StudyOutcome):
 
 
 def _drawn(outcome: StudyOutcome) -> list[tuple[str, np.ndarray, np.ndarray, int]]:
-    """Each tag with a row not flagged, in ``tracks.csv``'s order: its tag, those rows' ``x`` and ``y`` [m] and its
-    rows' count (a tag's rows at a time: 16 bytes of a row kept)."""
-    out = []
-    for tag, rows in tag_tracks(outcome.tracks, outcome.parts):
-        ok = rows[rows["quality"] != "flagged"]
-        if len(ok):
-            out.append((tag, ok["x"].to_numpy(float), ok["y"].to_numpy(float), len(rows)))
-    return out
+    """Each tag with a row not flagged, in ``tracks.csv``'s order: :func:`_drawn_tag`'s (a tag's rows at a time)."""
+    return [d for tag, rows in tag_tracks(outcome.tracks, outcome.parts) if (d := _drawn_tag(tag, rows))]
+
+
+def _drawn_tag(tag: str, rows) -> tuple[str, np.ndarray, np.ndarray, int] | None:
+    """A tag as the map draws it: its tag, its rows not flagged's ``x`` and ``y`` [m] and its rows' count (16 bytes
+    of a row kept); None where every row is flagged."""
+    ok = rows[rows["quality"] != "flagged"]
+    return (tag, ok["x"].to_numpy(float), ok["y"].to_numpy(float), len(rows)) if len(ok) else None
 
 
 def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float], tags: list) -> list:
@@ -224,17 +247,18 @@ def _draw(ax, outcome: StudyOutcome, table, origin: tuple[float, float], tags: l
                         visible=False) for name, x, y in zip(table["receiver"], rx, ry)]  # shown where they fit
 
 
-def study_map(outcome: StudyOutcome):
+def study_map(outcome: StudyOutcome, tags: list | None = None):
     """The study on a map (matplotlib): the receivers used, each tracked tag's track (its rows not flagged) and its
     receivers ringed in its colour, labels that do not overlap (the most detections first), a scale bar and a
     north arrow, axes as offsets in metres in the frame from a round origin, the frame and the counts in the
     title (as the console gives them); beside it the legend, the deployments used and not and each tag not
-    tracked with its reason."""
+    tracked with its reason. ``tags``: the tracks as :func:`_drawn` gives them (default read from the tags' rows).
+    """
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
     table = _used(outcome)
-    tags = _drawn(outcome)
+    tags = _drawn(outcome) if tags is None else tags
     xs = np.concatenate([table["x_m"].to_numpy(float), *(x for _, x, _, _ in tags)])
     ys = np.concatenate([table["y_m"].to_numpy(float), *(y for _, _, y, _ in tags)])
     finite = np.isfinite(xs) & np.isfinite(ys)
@@ -292,29 +316,54 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
             write(tag, folder / name)
     if outcome.sync is not None:
         write_sync(outcome.sync, folder / "sync")
-    if outcome.parts is not None:  # a tag's rows at a time, from its own file
-        outcome.parts.write(folder / "tracks.csv")
-    else:
-        outcome.tracks.to_csv(folder / "tracks.csv", index=False)
+    drawn = _write_tracks(outcome, folder)
     outcome.tags.to_csv(folder / "tags.csv", index=False)
     outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
     references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
     if outcome.positions is not None:
         outcome.positions.to_csv(folder / "positions.csv", index=False)
     (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
-    features = _features(outcome)
-    if features is not None:  # as json.dumps writes the whole collection, a feature at a time
-        with open(folder / "tracks.geojson", "w") as handle:
-            handle.write('{"type": "FeatureCollection", "features": [')
-            for k, feature in enumerate(features):
-                handle.write((", " if k else "") + json.dumps(plain(feature), allow_nan=False))
-            handle.write("]}\n")
-    fig = study_map(outcome)
+    fig = study_map(outcome, drawn)
     try:
         fig.savefig(folder / "map.png", dpi=110)
     finally:
         plt.close(fig)
     study_report(outcome, folder)  # report.html (and detections_daily.csv): from the files above
+
+
+def _write_tracks(outcome: StudyOutcome, folder: Path) -> list:
+    """``tracks.csv`` and ``tracks.geojson`` (where the frame has a CRS) in one reading of the tags' rows (each tag's
+    own ``track.csv`` read once: :meth:`~.study_tracks.TrackParts.write`), the map's tracks (:func:`_drawn`)
+    returned."""
+    drawn: list = []
+    table = _geo_table(outcome)
+    with ExitStack() as files:
+        geo, count = None, 0
+        if table is not None:  # as json.dumps writes the whole collection, a feature at a time
+            geo = files.enter_context(open(folder / "tracks.geojson", "w"))
+            geo.write('{"type": "FeatureCollection", "features": [')
+            for count, feature in enumerate(_receiver_features(outcome, table), 1):
+                geo.write((", " if count > 1 else "") + json.dumps(plain(feature), allow_nan=False))
+
+        def each(tag: str, rows) -> None:
+            nonlocal count
+            feature = None if geo is None else _track_feature(tag, rows)
+            if feature is not None:
+                count += 1
+                geo.write((", " if count > 1 else "") + json.dumps(plain(feature), allow_nan=False))
+            mapped = _drawn_tag(tag, rows)
+            if mapped is not None:
+                drawn.append(mapped)
+
+        if outcome.parts is not None:  # a tag's rows at a time, from its own file
+            outcome.parts.write(folder / "tracks.csv", each)
+        else:
+            outcome.tracks.to_csv(folder / "tracks.csv", index=False)
+            for tag, rows in tag_tracks(outcome.tracks, None):
+                each(tag, rows)
+        if geo is not None:
+            geo.write("]}\n")
+    return drawn
 
 
 __all__ = ["geojson", "study_map", "write_study"]

@@ -13,7 +13,7 @@ written from; pandas 2 when asked, ``float_precision="round_trip"``).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import pandas as pd
@@ -98,13 +98,16 @@ class TrackParts:
             rows = tag_rows(track, tag).reindex(columns=types.index)
             yield tag, rows.astype(types.to_dict()).sort_values("epoch_s", kind="stable")
 
-    def write(self, path: Path) -> None:
-        """``tracks.csv`` into ``path``, a tag's rows at a time."""
+    def write(self, path: Path, each: Callable[[str, pd.DataFrame], None] | None = None) -> None:
+        """``tracks.csv`` into ``path``, a tag's rows at a time; ``each(tag, rows)`` called with each tag's rows as
+        they are written (what else is made of them, from this one reading of the tag's file)."""
         with open(path, "w", newline="") as handle:
             wrote = False
-            for _, rows in self.parts():
+            for tag, rows in self.parts():
                 rows.to_csv(handle, index=False, header=not wrote)
                 wrote = True
+                if each is not None:
+                    each(tag, rows)
             if not wrote:
                 pd.DataFrame(columns=list(TRACK_COLUMNS)).to_csv(handle, index=False)
 

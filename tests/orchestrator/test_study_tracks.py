@@ -72,3 +72,22 @@ def test_a_tag_at_a_time_is_the_whole_table_byte_for_byte(tmp_path):
 def test_no_tag_writes_the_header_alone(tmp_path):
     TrackParts(tmp_path).write(tmp_path / "tracks.csv")
     assert (tmp_path / "tracks.csv").read_text() == ",".join(TRACK_COLUMNS) + "\n"
+
+
+def test_what_else_is_made_of_the_rows_comes_from_the_one_reading(tmp_path, monkeypatch):
+    """``TrackParts.write(path, each)``: ``each`` sees every tag's rows as ``tracks.csv`` holds them, in its order,
+    and each tag's own ``track.csv`` is read once (the GeoJSON's lines and the map's tracks made from that reading,
+    orchestrator/telemetry/outputs.py)."""
+    tracks = _tracks(np.random.default_rng(12), False)
+    parts = _parts(tmp_path, tracks)
+    reads: list = []
+    read_csv = pd.read_csv
+    monkeypatch.setattr(pd, "read_csv", lambda path, *a, **k: reads.append(path) or read_csv(path, *a, **k))
+    seen: list = []
+    parts.write(tmp_path / "tracks.csv", lambda tag, rows: seen.append((tag, rows.to_csv(index=False))))
+    assert sorted(reads) == sorted(tmp_path / "tags" / f"t{k}" / "track.csv" for k in range(len(tracks)))
+    monkeypatch.setattr(pd, "read_csv", read_csv)
+    assert [tag for tag, _ in seen] == sorted(tracks)
+    whole = combined_tracks({f"f{k}": SimpleNamespace(track=t) for k, t in enumerate(tracks.values())},
+                            {f"f{k}": SimpleNamespace(summary={"tag": tag}) for k, tag in enumerate(tracks)})
+    assert [text for _, text in seen] == [rows.to_csv(index=False) for _, rows in tag_tracks(whole, None)]
