@@ -21,6 +21,12 @@ covariance, ``P`` the smoothed covariances and ``C_k = cov(x_k, x_k−1)``. EM's
 determine ``q`` well; each is lengthened in ``log q`` by :data:`EM_OVERRELAXATION` (an over-relaxed EM; Salakhutdinov
 & Roweis, "Adaptive overrelaxed bound optimization methods", ICML 2003), and a step that overshoots (the M-step turns
 back) is taken at EM's own length.
+
+A record of more than :data:`EM_PINGS` pings (a high-residency tag's season: a ping every 2.5 s is 35,000 a day)
+takes its E-steps over :data:`EM_WINDOWS` windows of the record, spread evenly over it and :data:`EM_PINGS` pings
+together, each smoothed alone, and its M-step the closed form over their steps pooled (``q`` is one number for the
+record: the same expectation over any of its steps): EM's cost is then that of :data:`EM_PINGS` pings whatever the
+record's length, where each iteration over the whole record cost as much as the smoother's track itself.
 """
 
 from __future__ import annotations
@@ -40,19 +46,24 @@ EM_TOLERANCE = 0.02
 EM_OVERRELAXATION = 2.0
 #: The robust smoother's Gauss-Newton iterations in each E-step (warm-started at the previous states).
 E_STEP_ITERATIONS = 10
+#: The most pings EM smooths in each E-step, and the windows a longer record's E-steps take (module docstring).
+EM_PINGS = 20_000
+EM_WINDOWS = 4
 
 
 @dataclass(frozen=True)
 class NoiseEstimate:
     """What :func:`estimate_acceleration_psd` returns: ``q`` [m²/s³], the EM ``iterations``, whether it
-    ``converged``, the ``history`` of ``q`` and the last smoother's track (``track``, a
-    :class:`~sblsim.models.tracking.smoother.RobustTrack` at ``q``)."""
+    ``converged``, the ``history`` of ``q``, the last smoother's track (``track``, a
+    :class:`~sblsim.models.tracking.smoother.RobustTrack` at ``q``: the last window's where the record was taken in
+    windows) and the ``windows`` smoothed (rows first to end − 1: :func:`em_windows`)."""
 
     q: float
     iterations: int
     converged: bool
     history: tuple[float, ...]
     track: object
+    windows: tuple[tuple[int, int], ...] = ()
 
 
 def m_step(x: np.ndarray, P: np.ndarray, lag: np.ndarray, steps: np.ndarray, count: np.ndarray,
@@ -92,10 +103,21 @@ def m_step(x: np.ndarray, P: np.ndarray, lag: np.ndarray, steps: np.ndarray, cou
     return float(total.mean() / (2 * dim))
 
 
+def em_windows(m: int) -> list[tuple[int, int]]:
+    """The rows each E-step smooths, (first, end) pairs: the whole record where it has at most :data:`EM_PINGS`
+    pings, else :data:`EM_WINDOWS` windows of ``EM_PINGS // EM_WINDOWS`` pings each, centred in as many equal parts
+    of the record (module docstring)."""
+    if m <= EM_PINGS:
+        return [(0, m)]
+    size = EM_PINGS // EM_WINDOWS
+    firsts = ((np.arange(EM_WINDOWS) + 0.5) * m / EM_WINDOWS - size / 2).astype(int)
+    return [(int(a), int(a) + size) for a in firsts]
+
+
 def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, start: np.ndarray,
                               schedule) -> NoiseEstimate:
     """The motion model's ``q`` by over-relaxed EM (module docstring), from the robust smoother started at
-    ``start``.
+    ``start``; a record of more than :data:`EM_PINGS` pings in the windows of :func:`em_windows`.
 
     Parameters
     ----------
@@ -117,19 +139,24 @@ def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, 
     from sblsim.models.tracking.smoother import robust_smooth
 
     dim = receivers.shape[1]
-    steps = schedule.steps(settings.interval)
+    windows = em_windows(len(toa))
+    parts = [(toa[a:b], schedule if (a, b) == (0, len(toa)) else schedule.rows(a, b)) for a, b in windows]
     q = float(np.clip(settings.acceleration_psd, *PSD_RANGE))
-    X = np.asarray(start, float)
+    starts = [np.asarray(start, float)[a:b] for a, b in windows]
     history = [q]
     previous = None
     track = None
     converged = False
     for iteration in range(1, EM_ITERATIONS + 1):
-        track = robust_smooth(toa, receivers, replace(settings, acceleration_psd=q), [X], schedule=schedule,
-                              iterations=E_STEP_ITERATIONS if iteration > 1 else 3 * E_STEP_ITERATIONS)
-        X = track.x
-        target = float(np.clip(m_step(track.x, track.P, track.P_lag, steps, schedule.count, schedule.offset, dim),
-                               *PSD_RANGE))
+        totals = []  # each window's M-step and its steps' count
+        for k, (rows, part) in enumerate(parts):
+            track = robust_smooth(rows, receivers, replace(settings, acceleration_psd=q), [starts[k]], schedule=part,
+                                  iterations=E_STEP_ITERATIONS if iteration > 1 else 3 * E_STEP_ITERATIONS)
+            starts[k] = track.x
+            totals.append((m_step(track.x, track.P, track.P_lag, part.steps(settings.interval), part.count,
+                                  part.offset, dim), len(rows) - 1))
+        pooled = totals[0][0] if len(totals) == 1 else sum(v * n for v, n in totals) / sum(n for _, n in totals)
+        target = float(np.clip(pooled, *PSD_RANGE))
         change = np.log(target / q)
         if abs(change) < EM_TOLERANCE:
             converged = True
@@ -141,8 +168,8 @@ def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, 
         q = float(np.clip(q * np.exp(relax * change), *PSD_RANGE))
         previous = change
         history.append(q)
-    return NoiseEstimate(q, iteration, converged, tuple(history), track)
+    return NoiseEstimate(q, iteration, converged, tuple(history), track, tuple(windows))
 
 
-__all__ = ["EM_ITERATIONS", "EM_OVERRELAXATION", "EM_TOLERANCE", "E_STEP_ITERATIONS", "NoiseEstimate", "PSD_RANGE",
-           "estimate_acceleration_psd", "m_step"]
+__all__ = ["EM_ITERATIONS", "EM_OVERRELAXATION", "EM_PINGS", "EM_TOLERANCE", "EM_WINDOWS", "E_STEP_ITERATIONS",
+           "NoiseEstimate", "PSD_RANGE", "em_windows", "estimate_acceleration_psd", "m_step"]

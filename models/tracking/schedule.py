@@ -117,6 +117,13 @@ class PingSchedule:
         return replace(self, count=self.count[start:], offset=self.offset[start:], te_sigma=self.te_sigma[start:],
                        drift_sigma=self.drift_sigma[start:], gaps=tuple(g - start for g in self.gaps if g >= start))
 
+    def rows(self, first: int, end: int) -> PingSchedule:
+        """The schedule of the rows ``first`` to ``end`` − 1 alone (their steps, and the gaps among them)."""
+        last = max(end - 1, first)  # the steps first .. end − 2
+        return replace(self, count=self.count[first:last], offset=self.offset[first:last],
+                       te_sigma=self.te_sigma[first:last], drift_sigma=self.drift_sigma[first:last],
+                       gaps=tuple(g - first for g in self.gaps if first <= g < last))
+
     @classmethod
     def stable(cls, m: int, interval: float, jitter: float, drift: float) -> PingSchedule:
         """Every row one interval after the previous (the stable burst interval with no row missing)."""

@@ -154,7 +154,8 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
     estimated by EM (:func:`~sblsim.models.tracking.motion_noise.estimate_acceleration_psd`) from the single-ping
     fixes' own track (``fixes``: positions, emission times and the arrivals used, as
     :func:`~sblsim.models.receiver.toa_tracking.fix_pings` gives them), the default kept where they give no track;
-    and what was done (``summary.json``'s ``motion``)."""
+    and what was done (``summary.json``'s ``motion``; ``windows``, the rows [first, end) EM smoothed, where a long
+    record's E-steps took windows of it)."""
     from sblsim.models.receiver.toa_tracking import anchored_start
 
     if acceleration_psd is not None:
@@ -166,9 +167,11 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
         return settings, {"acceleration_psd_m2_s3": settings.acceleration_psd,
                           "source": "default (too few fixes to estimate it)"}
     found = estimate_acceleration_psd(toa, positions, settings, start, schedule)
-    return replace(settings, acceleration_psd=found.q), {
-        "acceleration_psd_m2_s3": found.q, "source": "estimated (EM)", "iterations": found.iterations,
-        "converged": found.converged, "history": list(found.history)}
+    said = {"acceleration_psd_m2_s3": found.q, "source": "estimated (EM)", "iterations": found.iterations,
+            "converged": found.converged, "history": list(found.history)}
+    if found.windows != ((0, len(toa)),):  # a long record's E-steps over windows of it: which rows
+        said["windows"] = [list(w) for w in found.windows]
+    return replace(settings, acceleration_psd=found.q), said
 
 
 __all__ = ["AGREE_AFTER", "DEPTH_SIGMA", "motion_model",
