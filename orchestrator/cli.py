@@ -13,7 +13,15 @@ import argparse
 import os
 import sys
 
-from sblsim.orchestrator.io.stop import ending, exit_status, is_stop, stop_on, workers_ignore_ctrl_c
+from sblsim.orchestrator.io.stop import (
+    SIGNAL_STATUS_BASE,
+    ending,
+    exit_past_threads,
+    exit_status,
+    is_stop,
+    stop_on,
+    workers_ignore_ctrl_c,
+)
 
 # a worker process a command spawns imports this module first: it ignores Ctrl-C (its command stops it) before the
 # seconds of imports below, in which a Ctrl-C at the terminal would end it with a traceback of its own
@@ -98,6 +106,16 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout = stdout
 
 
+def run(argv: list[str] | None = None) -> None:
+    """The ``sblsim`` console script and ``python -m sblsim.orchestrator.cli``: :func:`main`, then the process's exit
+    with its status; a command a stop ended does not wait for good on a thread a library left running
+    (:func:`~sblsim.orchestrator.io.stop.exit_past_threads`)."""
+    status = main(argv)
+    if status > SIGNAL_STATUS_BASE:  # a stop's status (128 + the signal); a command's own are 0, 1 and 2
+        exit_past_threads(status)
+    sys.exit(status)
+
+
 def _command(args: argparse.Namespace) -> int:
     try:
         with collected_notes():  # the configurations' notes: printed with the output folder, or at the end
@@ -133,4 +151,4 @@ def _ended_by(exc: BaseException, args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

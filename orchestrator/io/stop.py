@@ -14,14 +14,18 @@ SIGINT, 143 for SIGTERM, 129 for SIGHUP).
 A signal a parent process set to be ignored (``nohup``'s SIGHUP, a background job's SIGINT) stays ignored. The
 Python API installs no handler: its callers' own handling of signals is theirs. A worker process a command starts
 (a pool's, a Dask cluster's) ignores Ctrl-C (:func:`workers_ignore_ctrl_c`): a terminal sends it to the whole
-process group, and the command stops its workers itself.
+process group, and the command stops its workers itself. Once a stopped command has said its line, the process does
+not wait for good on a thread a library left running (:func:`exit_past_threads`).
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
+import sys
 import threading
+import time
 from contextlib import contextmanager
 from typing import Iterator
 
@@ -33,6 +37,10 @@ SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 SIGNAL_STATUS_BASE = 128
 #: The exit status of a stop without a recorded signal (a KeyboardInterrupt raised otherwise): Ctrl-C's.
 EXIT_INTERRUPTED = SIGNAL_STATUS_BASE + int(signal.SIGINT)
+
+#: How long a stopped command's process waits for the threads a library left running before it ends without them
+#: [s] (:func:`exit_past_threads`).
+THREADS_GRACE = 2.0
 
 #: The signals received since :func:`stop_on` began and whether the handler raises (False while a command that is
 #: stopping finishes its last lines): kept where the lowest layers see them (:mod:`sblsim.models.interrupts`).
@@ -98,6 +106,33 @@ def workers_ignore_ctrl_c() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def exit_past_threads(status: int, grace: float | None = None) -> None:
+    """In a command's process that a stop ended (its outputs cleaned, its line said): wait at most ``grace`` seconds
+    (default :data:`THREADS_GRACE`) in all for the threads the interpreter's exit would join (every one but daemons
+    and this one), then, where one still runs, end the process at once with ``status`` (``os._exit``, the standard
+    streams flushed first).
+
+    The interpreter's exit joins such a thread without a bound, and a library's can be stuck for good once its work
+    was cut short: CPython's process pool manager thread, after its workers were terminated while the pool was being
+    fed, waits on a queue nobody reads (python/cpython#105829, #125451, fixed after the 3.11 releases). Returns
+    (the interpreter's own exit follows) where none is left."""
+    deadline = time.monotonic() + (THREADS_GRACE if grace is None else grace)
+    here = threading.current_thread()
+
+    def lingering() -> list[threading.Thread]:
+        return [t for t in threading.enumerate() if t is not here and not t.daemon and t.is_alive()]
+
+    for thread in lingering():
+        thread.join(max(0.0, deadline - time.monotonic()))
+    if lingering():
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # a closed pipe, a closed stream: nothing more to say there
+                pass
+        os._exit(status)
+
+
 @contextmanager
 def deferred() -> Iterator[None]:
     """The stop's signals held back (blocked, not lost) while the body runs, delivered when it ends: for work that a
@@ -136,5 +171,5 @@ def stop_on() -> Iterator[None]:
         _RECEIVED.clear()
 
 
-__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "check", "deferred", "ending", "exit_status",
-           "is_stop", "pending", "stop_on", "workers_ignore_ctrl_c"]
+__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "THREADS_GRACE", "check", "deferred", "ending",
+           "exit_past_threads", "exit_status", "is_stop", "pending", "stop_on", "workers_ignore_ctrl_c"]

@@ -35,13 +35,16 @@ WITHIN = 5.0
 #: The child: ``sblsim``'s ``main`` running one command of its own. ``inside``: a casadi call whose argument's
 #: conversion (casadi's typecheck calls the argument's ``__DM__``) sends the process the signal, so that the handler
 #: runs inside ``Function_call``; ``spin``: the box-in's lever arm (casadi, a map over 2000 attitudes) in a loop,
-#: ``ready`` printed before it. Each prints the type of the exception that came out of the work.
+#: ``ready`` printed before it; ``linger``: a thread started that never ends (as a library's can be left stuck),
+#: then a loop. Each prints the type of the exception that came out of the work. Run as the console script runs
+#: (``cli.run``), its grace for lingering threads 0.3 s.
 CHILD = textwrap.dedent('''
-    import os, signal, sys, types
+    import os, signal, sys, threading, time, types
     import numpy as np
     import casadi as ca
     from sblsim.models.calibration import boxin
     from sblsim.orchestrator import cli
+    from sblsim.orchestrator.io import stop
 
     mode, signum = sys.argv[1], int(sys.argv[2])
 
@@ -71,8 +74,15 @@ CHILD = textwrap.dedent('''
                 print(type(exc).__name__, flush=True)
                 raise
 
+    def linger(args):
+        threading.Thread(target=threading.Event().wait, name="stuck").start()  # a library's, that never ends
+        print("ready", flush=True)
+        while True:
+            time.sleep(0.05)
+
+    stop.THREADS_GRACE = 0.3
     cli.COMMANDS[mode] = types.SimpleNamespace(main=locals()[mode], add_arguments=lambda p: None, HELP=mode)
-    sys.exit(cli.main([mode]))
+    cli.run([mode])
 ''')
 
 SIGNALS = {"SIGINT": signal.SIGINT, "SIGTERM": signal.SIGTERM, "SIGHUP": signal.SIGHUP}
@@ -96,6 +106,26 @@ def test_a_signal_handled_inside_a_casadi_call_is_the_stop(tmp_path, name):
     assert out.splitlines() == ["NotImplementedError"], (out, err)  # inside the compiled call, the signal lost there
     assert proc.returncode == 128 + sig, (proc.returncode, err)
     assert err.splitlines() == ["sblsim: interrupted"], err
+
+
+def test_a_stopped_command_does_not_wait_for_good_on_a_stuck_thread(tmp_path):
+    """A thread the interpreter's exit would join that never ends (a library's, stuck once its work was cut short:
+    CPython 3.11's process pool manager thread): stopped, the command says its one line and its process ends with
+    128 + the signal after its grace (0.3 s here), where the interpreter's exit alone would wait for good."""
+    proc = _child(tmp_path, "linger", signal.SIGTERM)
+    try:
+        assert proc.stdout.readline().strip() == "ready", proc.communicate()
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
+    assert err.splitlines() == ["sblsim: interrupted"], err
+    assert 0.3 <= took < WITHIN, took
 
 
 @pytest.mark.slow
