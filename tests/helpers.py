@@ -115,6 +115,23 @@ def start_for_signals(command: Sequence[str], **kwargs: Any) -> subprocess.Popen
     return subprocess.Popen(command, preexec_fn=_default_signals, **kwargs)
 
 
+def signal_and_wait(proc: subprocess.Popen, sig: int, timeout: float = 60.0) -> tuple[str, str, float]:
+    """Send ``proc`` the signal and wait for its end: its standard output and error and the seconds from the signal
+    to its end. A process still running after ``timeout`` seconds is killed (the wait's ``TimeoutExpired`` raised),
+    as is one the wait is interrupted out of."""
+    import time
+
+    try:
+        sent = time.monotonic()
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=timeout)
+        return out, err, time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def share_compiled_objects(cache: Path) -> int:
     """Give the sblsim cache folder ``cache`` (empty: a user's first run) the objects the suite's cache holds, as
     hard links (copies across file systems); the number given.

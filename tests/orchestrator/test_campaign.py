@@ -28,7 +28,7 @@ from sblsim.orchestrator.campaign.study import load_study
 from sblsim.orchestrator.cosim.config import load_config
 from sblsim.orchestrator.cosim.metrics import FLAG_NAMES, RUN_METRICS
 from sblsim.orchestrator.cosim.run import run
-from tests.helpers import start_for_signals
+from tests.helpers import signal_and_wait, start_for_signals
 
 ROOT = Path(__file__).resolve().parents[2]
 REPLICATES = 3
@@ -673,14 +673,11 @@ def test_ctrl_c_stops_the_worker_processes_at_once(tmp_path):
             time.sleep(0.01)
         time.sleep(2.0)  # the workers are started and inside their first chunks
         assert proc.poll() is None
-        sent = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
-        delay = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+    _, stderr, delay = signal_and_wait(proc, signal.SIGINT)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
     assert "interrupted" in stderr.splitlines()[-1], stderr

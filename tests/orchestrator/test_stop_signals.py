@@ -28,7 +28,7 @@ from sblsim.orchestrator import cli
 from sblsim.orchestrator.io import stop
 from sblsim.orchestrator.io.progress import Progress
 from sblsim.orchestrator.tracks.resume import MARKER
-from tests.helpers import start_for_signals
+from tests.helpers import signal_and_wait, start_for_signals
 
 #: The most a command may take to end after the signal [s] (the issue's bound).
 WITHIN = 5.0
@@ -113,16 +113,10 @@ def test_a_stopped_command_does_not_wait_for_good_on_a_stuck_thread(tmp_path):
     CPython 3.11's process pool manager thread): stopped, the command says its one line and its process ends with
     128 + the signal after its grace (0.3 s here), where the interpreter's exit alone would wait for good."""
     proc = _child(tmp_path, "linger", signal.SIGTERM)
-    try:
-        assert proc.stdout.readline().strip() == "ready", proc.communicate()
-        sent = time.monotonic()
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=60)
-        took = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    if proc.stdout.readline().strip() != "ready":
+        proc.kill()
+        pytest.fail(str(proc.communicate()))
+    _, err, took = signal_and_wait(proc, signal.SIGTERM)
     assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
     assert err.splitlines() == ["sblsim: interrupted"], err
     assert 0.3 <= took < WITHIN, took
