@@ -113,9 +113,9 @@ def exit_past_threads(status: int, grace: float | None = None) -> None:
     streams flushed first).
 
     The interpreter's exit joins such a thread without a bound, and a library's can be stuck for good once its work
-    was cut short: CPython's process pool manager thread, after its workers were terminated while the pool was being
-    fed, waits on a queue nobody reads (python/cpython#105829, #125451, fixed after the 3.11 releases). Returns
-    (the interpreter's own exit follows) where none is left."""
+    was cut short: CPython's process pool manager thread has deadlocked in its shutdown (python/cpython#105829, its
+    wake-up pipe full of submissions; #125451, its shutdown against its feeding thread's error). Returns (the
+    interpreter's own exit follows) where none is left."""
     deadline = time.monotonic() + (THREADS_GRACE if grace is None else grace)
     here = threading.current_thread()
 
