@@ -339,18 +339,22 @@ def _write_tracks(outcome: StudyOutcome, folder: Path) -> list:
     table = _geo_table(outcome)
     with ExitStack() as files:
         geo, count = None, 0
-        if table is not None:  # as json.dumps writes the whole collection, a feature at a time
+
+        def put(feature: dict[str, Any]) -> None:  # as json.dumps writes the whole collection, a feature at a time
+            nonlocal count
+            geo.write((", " if count else "") + json.dumps(plain(feature), allow_nan=False))
+            count += 1
+
+        if table is not None:
             geo = files.enter_context(open(folder / "tracks.geojson", "w"))
             geo.write('{"type": "FeatureCollection", "features": [')
-            for count, feature in enumerate(_receiver_features(outcome, table), 1):
-                geo.write((", " if count > 1 else "") + json.dumps(plain(feature), allow_nan=False))
+            for feature in _receiver_features(outcome, table):
+                put(feature)
 
         def each(tag: str, rows) -> None:
-            nonlocal count
             feature = None if geo is None else _track_feature(tag, rows)
             if feature is not None:
-                count += 1
-                geo.write((", " if count > 1 else "") + json.dumps(plain(feature), allow_nan=False))
+                put(feature)
             mapped = _drawn_tag(tag, rows)
             if mapped is not None:
                 drawn.append(mapped)
