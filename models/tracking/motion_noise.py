@@ -140,7 +140,7 @@ def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, 
 
     dim = receivers.shape[1]
     windows = em_windows(len(toa))
-    parts = [(toa[a:b], schedule if (a, b) == (0, len(toa)) else schedule.rows(a, b)) for a, b in windows]
+    parts = [(toa[a:b], schedule.rows(a, b)) for a, b in windows]
     q = float(np.clip(settings.acceleration_psd, *PSD_RANGE))
     starts = [np.asarray(start, float)[a:b] for a, b in windows]
     history = [q]
@@ -155,6 +155,7 @@ def estimate_acceleration_psd(toa: np.ndarray, receivers: np.ndarray, settings, 
             starts[k] = track.x
             totals.append((m_step(track.x, track.P, track.P_lag, part.steps(settings.interval), part.count,
                                   part.offset, dim), len(rows) - 1))
+        # the whole record's own M-step where it is one window (v n / n need not be v to the bit)
         pooled = totals[0][0] if len(totals) == 1 else sum(v * n for v, n in totals) / sum(n for _, n in totals)
         target = float(np.clip(pooled, *PSD_RANGE))
         change = np.log(target / q)
