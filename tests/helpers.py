@@ -13,6 +13,7 @@ import os
 import shutil
 import signal
 import subprocess
+import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -119,8 +120,6 @@ def signal_and_wait(proc: subprocess.Popen, sig: int, timeout: float = 60.0) -> 
     """Send ``proc`` the signal and wait for its end: its standard output and error and the seconds from the signal
     to its end. A process still running after ``timeout`` seconds is killed (the wait's ``TimeoutExpired`` raised),
     as is one the wait is interrupted out of."""
-    import time
-
     try:
         sent = time.monotonic()
         proc.send_signal(sig)

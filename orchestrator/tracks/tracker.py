@@ -169,7 +169,7 @@ def motion_model(toa: np.ndarray, positions: np.ndarray, settings, schedule, fix
     found = estimate_acceleration_psd(toa, positions, settings, start, schedule)
     said = {"acceleration_psd_m2_s3": found.q, "source": "estimated (EM)", "iterations": found.iterations,
             "converged": found.converged, "history": list(found.history)}
-    if found.windows != ((0, len(toa)),):  # a long record's E-steps over windows of it: which rows
+    if len(found.windows) > 1:  # a long record's E-steps over windows of it: which rows
         said["windows"] = [list(w) for w in found.windows]
     return replace(settings, acceleration_psd=found.q), said
 
