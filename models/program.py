@@ -252,7 +252,9 @@ class ProgramBuilder:
         """
         check()  # each view begins a piece of the symbolic build: a stop whose exception casadi lost ends it here
         p = self.p if p is None else p
-        out = {v.name: p[k] for k, v in enumerate(self.param_vars)}
+        # one split into the elements, not an indexing a parameter (a component's tables hold thousands)
+        elements = ca.vertsplit(p) if isinstance(p, ca.SX) else [p[k] for k in range(len(self.param_vars))]
+        out = dict(zip((v.name for v in self.param_vars), elements, strict=True))
         index = {v.name: k for k, v in enumerate(self.param_vars)}
         for v in self.param_vars:
             if v.table is not None:
@@ -327,7 +329,8 @@ class ProgramBuilder:
         values = handler(x, u, p, d, ws, self.t, self.h)
         x_next = self.X.pack(values, x)
         # the states the handler changes: an element that is not the state's own symbol
-        writes = tuple(k for k in range(x_next.numel()) if not ca.is_equal(x_next[k], self.x[k]))
+        writes = tuple(k for k, (new, own) in enumerate(zip(ca.vertsplit(x_next), ca.vertsplit(self.x), strict=True))
+                       if not ca.is_equal(new, own))
         if len(writes) > WHOLE_STATE * x_next.numel():
             writes, x_next = None, ca.densify(x_next)  # most of them: the whole state, written in sequence
         else:

@@ -137,9 +137,16 @@ def padded(beacons: np.ndarray, arms: np.ndarray, heard: np.ndarray, noise_varia
     extra = slots - beacons.shape[-2]
     far = np.zeros(beacons.shape[:-2] + (extra, 3))
     far[..., 0], far[..., 1] = FAR, FAR
-    widen = [(0, 0)] * (heard.ndim - 1) + [(0, extra)]
     return (np.concatenate([beacons, far], axis=-2), np.concatenate([arms, np.zeros_like(far)], axis=-2),
-            np.pad(heard, widen), np.pad(noise_variance, widen, constant_values=1.0))
+            _widened(heard, slots, 0.0), _widened(noise_variance, slots, 1.0))
+
+
+def _widened(values: np.ndarray, slots: int, fill: float) -> np.ndarray:
+    """``values`` (..., n) in the first n of ``slots`` columns, the rest ``fill`` (numpy's pad, without its cost
+    a call: the design's search pads every candidate layout)."""
+    out = np.full(values.shape[:-1] + (slots,), fill)
+    out[..., :values.shape[-1]] = values
+    return out
 
 
 def layout_values(points: np.ndarray, beacons: np.ndarray, arms: np.ndarray, heard, noise_variance,

@@ -584,7 +584,8 @@ BAD_STUDIES = {"unknown factor key": _bad_factor_key, "level out of range": _lev
                "zero replicates": _zero_replicates}
 
 
-@pytest.mark.parametrize("case", list(BAD_STUDIES))
+@pytest.mark.parametrize("case", [case if k == 0 else pytest.param(case, marks=pytest.mark.slow)
+                                  for k, case in enumerate(BAD_STUDIES)])
 def test_bad_study_is_one_line_and_writes_nothing(tmp_path, case):
     table = study_table()
     needles = BAD_STUDIES[case](table)

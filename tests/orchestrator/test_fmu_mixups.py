@@ -71,6 +71,7 @@ def test_a_guid_that_does_not_match_the_binary(fmu_dir, tmp_path):
     _one_line(proc, tmp_path, "guid.fmu (receiver)", "fmi2Instantiate failed: GUID {", "does not match this binary's {")
 
 
+@pytest.mark.slow
 def test_an_fmu_without_binaries_for_this_platform(fmu_dir, tmp_path):
     from fmpy import platform
 
@@ -79,6 +80,7 @@ def test_an_fmu_without_binaries_for_this_platform(fmu_dir, tmp_path):
     _one_line(proc, tmp_path, "nobin.fmu (receiver)", f"has no binaries/{platform}")
 
 
+@pytest.mark.slow
 def test_a_model_identifier_that_names_no_library(fmu_dir, tmp_path):
     fmu = _copy(fmu_path(fmu_dir, "receiver"), tmp_path / "ident.fmu",
                 edit=lambda d: d.replace(b'modelIdentifier="sblsim_receiver"', b'modelIdentifier="elsewhere"'))
@@ -88,7 +90,7 @@ def test_a_model_identifier_that_names_no_library(fmu_dir, tmp_path):
 
 
 @pytest.mark.parametrize("entry, data, message", [
-    ("resources/bomb.bin", bytes(64 << 20), "inflates"),       # 64 MiB of zeros in a few kB
+    pytest.param("resources/bomb.bin", bytes(64 << 20), "inflates", marks=pytest.mark.slow),  # 64 MiB of zeros
     ("../escaped.txt", b"outside", "climbs out of the package"),
 ])
 def test_a_hostile_archive_is_refused_before_anything_is_unpacked(fmu_dir, tmp_path, entry, data, message):

@@ -164,9 +164,10 @@ def test_a_campaign_row_is_the_run_of_its_levels(campaign):
 
 @pytest.mark.parametrize(("change", "needles"), [
     ({"bottom": {"high": "lava"}}, ["factors.bottom.high", "'lava'", "sand", "rock"]),
-    ({"SL": {"high": 300.0}}, ["factors.SL.high", "[100, 250] dB"]),
-    ({"sea": {"high": 13}}, ["factors.sea.high", "[0, 8]"]),
-    ({"scenarios": ["semicircle"]}, ["factors.SL.key", "acoustics.detection", "semicircle"]),
+    *(pytest.param(*case, marks=pytest.mark.slow) for case in [  # a study run each (1 s): one in the fast tier
+        ({"SL": {"high": 300.0}}, ["factors.SL.high", "[100, 250] dB"]),
+        ({"sea": {"high": 13}}, ["factors.sea.high", "[0, 8]"]),
+        ({"scenarios": ["semicircle"]}, ["factors.SL.key", "acoustics.detection", "semicircle"])]),
 ])
 def test_a_bad_site_level_is_one_line_and_writes_nothing(tmp_path, change, needles):
     table = json.loads(json.dumps(STUDY))
