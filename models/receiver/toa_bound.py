@@ -234,14 +234,29 @@ def transition(velocity: np.ndarray, interval: float, motion: MotionModel, count
     :func:`predict`): ``count`` stable intervals (``interval / count`` each; 0: a step of its own, the random and
     pseudo-random burst intervals), the emission time's step error ``te_sigma`` [s] (default the motion's jitter)
     and the interval's ``drift_sigma`` [s] (default its drift)."""
-    d = len(velocity)
-    s, T = 2 * d + 2, float(interval)
-    state = np.zeros(s)
-    state[d:2 * d], state[-1] = velocity, T / count if count else 0.0
-    F = predict(state[None], d, np.array([count]), np.array([0.0 if count else T]))[1][0]
-    Q = process_noise(np.array([T]), motion.acceleration_psd,
-                      np.array([motion.jitter if te_sigma is None else te_sigma]),
-                      np.array([motion.interval_drift if drift_sigma is None else drift_sigma]), d)[0]
+    F, Q = transitions(np.asarray(velocity, float)[None], np.array([interval], float), motion, np.array([count]),
+                       None if te_sigma is None else np.array([te_sigma]),
+                       None if drift_sigma is None else np.array([drift_sigma]))
+    return F[0], Q[0]
+
+
+def transitions(velocities: np.ndarray, intervals: np.ndarray, motion: MotionModel, count: np.ndarray | None = None,
+                te_sigma: np.ndarray | None = None, drift_sigma: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`transition` of k steps at once: F (k, s, s) and Q (k, s, s) at the true velocities (k, dim) [m/s]
+    over steps of ``intervals`` (k,) [s], ``count`` (k,) stable intervals each (default 1), ``te_sigma`` and
+    ``drift_sigma`` (k,) [s] (default the motion's jitter and drift)."""
+    velocities = np.asarray(velocities, float)
+    k, d = velocities.shape
+    T = np.asarray(intervals, float)
+    n = np.ones(k) if count is None else np.asarray(count, float)
+    stable = n != 0
+    states = np.zeros((k, 2 * d + 2))
+    states[:, d:2 * d] = velocities
+    states[stable, -1] = T[stable] / n[stable]
+    F = predict(states, d, n, np.where(stable, 0.0, T))[1]
+    Q = process_noise(T, motion.acceleration_psd, np.full(k, motion.jitter) if te_sigma is None else te_sigma,
+                      np.full(k, motion.interval_drift) if drift_sigma is None else drift_sigma, d)
     return F, Q
 
 
@@ -312,22 +327,26 @@ def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, h
     Fs = np.tile(np.eye(s), (m, 1, 1))  # row k: the transition from k − 1 to k
     B[0] = np.linalg.inv(J)
     Bp[0] = B[0]
+    # every step's terms at once (they follow the true track, not the recursion); the recursion alone a step at a time
+    F, Q = transitions(velocities[:m - 1], intervals, motion) if schedule is None else \
+        transitions(velocities[:m - 1], intervals, motion, schedule.count[:m - 1], schedule.te_sigma[:m - 1],
+                    schedule.drift_sigma[:m - 1])
+    Fs[1:] = F
+    Qi = np.linalg.inv(Q)
+    FT = np.swapaxes(F, 1, 2)
+    D11 = FT @ Qi @ F
+    D12 = -FT @ Qi
+    D22 = Qi + Jz[1:]
     for k in range(m - 1):
-        F, Q = transition(velocities[k], intervals[k], motion) if schedule is None else \
-            transition(velocities[k], intervals[k], motion, schedule.count[k], schedule.te_sigma[k],
-                       schedule.drift_sigma[k])
-        Qi = np.linalg.inv(Q)
-        D11 = F.T @ Qi @ F
-        D12 = -F.T @ Qi
-        D22 = Qi + Jz[k + 1]
-        J = D22 - D12.T @ np.linalg.solve(J + D11, D12)
+        J = D22[k] - D12[k].T @ np.linalg.solve(J + D11[k], D12[k])
         J = 0.5 * (J + J.T)
-        B[k + 1] = np.linalg.inv(J)
-        Fs[k + 1] = F
-        Bp[k + 1] = F @ B[k] @ F.T + Q
+        B[k + 1] = J  # the information, made the bound below
+    B[1:] = np.linalg.inv(B[1:])
+    Bp[1:] = F @ B[:-1] @ FT + Q
+    gains = np.swapaxes(np.linalg.solve(Bp[1:], F @ B[:-1]), 1, 2)  # the smoother's C_k
     Bs = B.copy()
     for k in range(m - 2, -1, -1):
-        C = np.linalg.solve(Bp[k + 1], Fs[k + 1] @ B[k]).T
+        C = gains[k]
         Bs[k] = B[k] + C @ (Bs[k + 1] - Bp[k + 1]) @ C.T
         Bs[k] = 0.5 * (Bs[k] + Bs[k].T)
 
@@ -344,4 +363,4 @@ def rms(values: np.ndarray) -> float:
 
 
 __all__ = ["MotionModel", "TrackBound", "directions", "drms", "fix_drms", "ping_information", "pcrb",
-           "position_information", "predict", "process_noise", "rms", "transition"]
+           "position_information", "predict", "process_noise", "rms", "transition", "transitions"]
