@@ -1,5 +1,6 @@
 """The accuracy limit of an inverted LBL (:mod:`sblsim.models.receiver.toa_bound`): the single-ping Fisher
-information against a finite-difference one built with numpy, the PCRB recursion against the covariance form, and
+information against a finite-difference one built with numpy, the PCRB recursion against the covariance form, the
+filtered and smoothed bounds against the whole track's information inverted as one matrix, and
 both bounds reached by the estimators on simulated pings (the single-ping fix by Monte Carlo at a fixed point, the
 EKF over 20 seeds)."""
 
@@ -89,3 +90,57 @@ def test_ekf_reaches_its_pcrb_over_20_seeds():
     ratio = np.sqrt(np.mean(np.concatenate(squared_errors)) / np.mean(np.concatenate(squared_bounds)))
     print(f"EKF RMS / PCRB over 20 seeds: {ratio:.3f}")
     assert 1 / 1.3 <= ratio <= 1.3, ratio
+
+
+def test_the_pcrb_and_smoothing_bound_are_the_whole_tracks_information_inverted():
+    """The recursions of :func:`tb.pcrb` (filtered: Tichavský's; smoothed: RTS) against the whole track's Fisher
+    information built as one dense matrix here (the start's prior, each step's ``[Fᵀ Q⁻¹ F, −Fᵀ Q⁻¹; −Q⁻¹ F, Q⁻¹]``,
+    each ping's information) and inverted: the filtered bound of ping k is the last block of the inverse of the
+    pings 0..k's information, the smoothed one the k-th block of the whole's. Steps of burst type (no stable
+    interval: count 0) and stable ones mixed, the receivers heard varying."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(5)
+    m, d = 7, 2
+    s = 2 * d + 2
+    positions = rng.uniform(0.0, 100.0, (m, d))
+    velocities = rng.normal(0.0, 0.3, (m, d))
+    emissions = np.cumsum(rng.uniform(2.0, 4.0, m))
+    heard = rng.random((m, len(RECEIVERS))) < 0.7
+    heard[0] = True
+    motion = tb.MotionModel(1e-3, 2e-4, 1e-5, 1.0, 0.05)
+    schedule = SimpleNamespace(count=np.array([1.0, 0.0, 2.0, 1.0, 0.0, 1.0]), te_sigma=rng.uniform(1e-4, 5e-4, m - 1),
+                               drift_sigma=rng.uniform(1e-6, 1e-5, m - 1))
+    bound = tb.pcrb(positions, velocities, emissions, heard, RECEIVERS, C, SIGMA, motion, schedule)
+
+    idx = np.r_[0:d, 2 * d]
+    info = tb.ping_information(positions, heard, RECEIVERS, C, SIGMA)
+    whole = np.zeros((m * s, m * s))
+    for k in range(m):
+        block = whole[k * s:(k + 1) * s, k * s:(k + 1) * s]
+        block[np.ix_(idx, idx)] += info[k]
+    whole[d:2 * d, d:2 * d] += np.eye(d) / motion.sigma_speed**2
+    whole[s - 1, s - 1] += 1.0 / motion.sigma_interval**2
+    for k in range(m - 1):
+        F, Q = tb.transition(velocities[k], emissions[k + 1] - emissions[k], motion, schedule.count[k],
+                             schedule.te_sigma[k], schedule.drift_sigma[k])
+        Qi = np.linalg.inv(Q)
+        a, b = slice(k * s, (k + 1) * s), slice((k + 1) * s, (k + 2) * s)
+        whole[a, a] += F.T @ Qi @ F
+        whole[a, b] -= F.T @ Qi
+        whole[b, a] -= Qi @ F
+        whole[b, b] += Qi
+    smoothed = np.linalg.inv(whole)
+    for k in range(m):
+        # the filter's information on ping k is the first k + 1 pings' alone: the later pings' step terms
+        # on block k (Fᵀ Q⁻¹ F) are not in it
+        filtered_info = whole[:(k + 1) * s, :(k + 1) * s].copy()
+        if k < m - 1:
+            F, Q = tb.transition(velocities[k], emissions[k + 1] - emissions[k], motion, schedule.count[k],
+                                 schedule.te_sigma[k], schedule.drift_sigma[k])
+            filtered_info[k * s:, k * s:] -= F.T @ np.linalg.inv(Q) @ F
+        filtered = np.linalg.inv(filtered_info)[k * s:, k * s:]
+        np.testing.assert_allclose(bound.B_filtered[k], filtered, rtol=1e-6, atol=1e-15, err_msg=f"filtered {k}")
+        np.testing.assert_allclose(bound.B_smoothed[k], smoothed[k * s:(k + 1) * s, k * s:(k + 1) * s], rtol=1e-6,
+                                   atol=1e-15, err_msg=f"smoothed {k}")
+    np.testing.assert_allclose(bound.filtered, np.sqrt(np.trace(bound.B_filtered[:, :d, :d], axis1=1, axis2=2)))
