@@ -17,10 +17,11 @@ the simulation's (no EM). Each stage's time (wall clock, and the process's CPU t
 a core whatever else runs) and the peak resident memory over the track (the process's high-water mark, reset
 before it where Linux allows, else since the start); the per-ping time against the smallest size's
 (1.00 for linear scaling); at the smallest size, the EKF with the RTS smoother on the same pings (a ping-by-ping
-loop) per ping beside it, with its baseline (the TOA model called per ping as before: :func:`casadi_called`);
-and the whole replay (``sblsim.replay_toa`` from files: the EM of the motion noise,
-the EKF, the sequential EKF, the UKF, both smoothers, the quality marks, scoring) at ``--replay-pings``. A JSON
-line last.
+loop) per ping beside it, with its baseline (the TOA model called per ping as before: :func:`casadi_called`),
+and the PCRB with the smoothing bound along the true track (what a replay scores against) with its baseline (a
+step's terms made inside the recursion as before: :func:`pcrb_stepwise`); and the whole replay
+(``sblsim.replay_toa`` from files: the EM of the motion noise, the EKF, the sequential EKF, the UKF, both smoothers,
+the quality marks, scoring) at ``--replay-pings``. A JSON line last.
 
 The baseline, measured in the same run on the same records (unless ``--no-baseline``): the same track with the
 fixes' splice rounds as they were before (:func:`whole_rounds`: each round a re-solve of the whole record from the
@@ -215,6 +216,58 @@ def ekf_rts(toa: np.ndarray, receivers: np.ndarray, sound_speed: float, accelera
     return out
 
 
+def pcrb_stepwise(positions, velocities, emissions, heard, receivers, c, sigma_toa, motion):
+    """The baseline of the PCRB along a track: :func:`~sblsim.models.receiver.toa_bound.pcrb` (one stable interval
+    a step) as it was, every step's transition, process noise and their products made inside the recursion, one
+    step at a time."""
+    from sblsim.models.receiver import toa_bound as tb
+
+    m, d = positions.shape
+    s, idx = 2 * d + 2, np.r_[0:d, 2 * d]
+    Jz = np.zeros((m, s, s))
+    Jz[np.ix_(np.arange(m), idx, idx)] = tb.ping_information(positions, heard, receivers, c, sigma_toa)
+    J = Jz[0].copy()
+    J[d:2 * d, d:2 * d] += np.eye(d) / motion.sigma_speed**2
+    J[-1, -1] += 1.0 / motion.sigma_interval**2
+    intervals = np.diff(emissions)
+    B, Bp, Fs = np.empty((m, s, s)), np.empty((m, s, s)), np.tile(np.eye(s), (m, 1, 1))
+    B[0] = Bp[0] = np.linalg.inv(J)
+    for k in range(m - 1):
+        F, Q = tb.transition(velocities[k], intervals[k], motion)
+        Qi = np.linalg.inv(Q)
+        D11, D12 = F.T @ Qi @ F, -F.T @ Qi
+        J = Qi + Jz[k + 1] - D12.T @ np.linalg.solve(J + D11, D12)
+        J = 0.5 * (J + J.T)
+        B[k + 1], Fs[k + 1], Bp[k + 1] = np.linalg.inv(J), F, F @ B[k] @ F.T + Q
+    Bs = B.copy()
+    for k in range(m - 2, -1, -1):
+        C = np.linalg.solve(Bp[k + 1], Fs[k + 1] @ B[k]).T
+        Bs[k] = B[k] + C @ (Bs[k + 1] - Bp[k + 1]) @ C.T
+        Bs[k] = 0.5 * (Bs[k] + Bs[k].T)
+    return B, Bs
+
+
+def bound(toa: np.ndarray, receivers: np.ndarray, truth: np.ndarray, emissions: np.ndarray, settings,
+          baseline: bool = True) -> dict:
+    """The PCRB and the smoothing bound along the record's true track (what a replay scores its track against):
+    their time [s] (``bound_s``); with ``baseline``, :func:`pcrb_stepwise`'s (``bound_baseline_s``) and whether
+    the two give the same bounds to the last bit (``bound_same``)."""
+    from sblsim.models.receiver import toa_bound as tb
+
+    velocities = np.gradient(truth, emissions, axis=0)
+    args = (truth, velocities, emissions, np.isfinite(toa), receivers, SOUND_SPEED, settings.sigma_toa,
+            tb.MotionModel.of(settings))
+    start = time.perf_counter()
+    today = tb.pcrb(*args)
+    out = {"bound_s": time.perf_counter() - start}
+    if baseline:
+        start = time.perf_counter()
+        before = pcrb_stepwise(*args)
+        out |= {"bound_baseline_s": time.perf_counter() - start,
+                "bound_same": all(np.array_equal(a, b) for a, b in zip((today.B_filtered, today.B_smoothed), before))}
+    return out
+
+
 def replay(n_pings: int, seed: int = 0) -> dict:
     """The whole replay (``sblsim.replay_toa``, the sound speed given) of the record of ``n_pings`` written to files:
     its time [s] (``replay_s``, the files' reading among it) and the track's RMS error [m] (``replay_rms_m``)."""
@@ -250,6 +303,7 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3, 
     small = simulate(counts[0], seed)
     track(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd)  # loads the modules, untimed
     ekf = ekf_rts(small[0], small[1], SOUND_SPEED, small[4].acceleration_psd, baseline)
+    ekf |= bound(*small[:4], small[4], baseline)
     runs, robust = [], None
 
     def summary(r, count, truth, arrivals):
@@ -283,12 +337,15 @@ def measure(n_pings: int, seed: int = 0, replay_pings: int = 0, sizes: int = 3, 
            "target_s": TARGET_S, "target_gib": TARGET_BYTES / 1024**3,
            "per_ping_us": [run["per_ping_us"] for run in runs], "ratio": [run["ratio"] for run in runs],
            "sizes": counts, "rms_m": last["rms_m"], "ekf_rts_per_ping_us": 1e6 * ekf["ekf_rts_s"] / counts[0],
+           "bound_per_ping_us": 1e6 * ekf["bound_s"] / counts[0],
            "cores": os.cpu_count(), "runs": runs, "robust": robust}
     if baseline:
         out |= {"baseline_track_cpu_s": last["baseline"]["track_cpu_s"], "cpu_ratio": last["cpu_ratio"],
                 "moved_m": last["moved_m"], "moved_te_m": last["moved_te_m"],
                 "ekf_rts_baseline_per_ping_us": 1e6 * ekf["ekf_rts_baseline_s"] / counts[0],
-                "ekf_rts_ratio": ekf["ekf_rts_s"] / ekf["ekf_rts_baseline_s"], "ekf_rts_same": ekf["ekf_rts_same"]}
+                "ekf_rts_ratio": ekf["ekf_rts_s"] / ekf["ekf_rts_baseline_s"], "ekf_rts_same": ekf["ekf_rts_same"],
+                "bound_baseline_per_ping_us": 1e6 * ekf["bound_baseline_s"] / counts[0],
+                "bound_ratio": ekf["bound_s"] / ekf["bound_baseline_s"], "bound_same": ekf["bound_same"]}
     if replay_pings:
         out |= {"replay_pings": replay_pings, **replay(replay_pings, seed)}
     return out
@@ -326,6 +383,11 @@ def main() -> None:
              f"time {r['ekf_rts_ratio']:.2f}× its; the same records to the last bit: {r['ekf_rts_same']})"
              if "ekf_rts_ratio" in r else "")
           + f"; targets at 10⁶ pings: {r['target_s']:g} s of CPU and {r['target_gib']:g} GiB on one core")
+    print(f"the PCRB and the smoothing bound along the true track at {r['sizes'][0]:,} pings: "
+          f"{r['bound_per_ping_us']:.1f} µs per ping"
+          + (f" (the baseline, a step's terms made inside the recursion: {r['bound_baseline_per_ping_us']:.1f} µs; "
+             f"today's time {r['bound_ratio']:.2f}× its; the same bounds to the last bit: {r['bound_same']})"
+             if "bound_ratio" in r else ""))
     if "replay_s" in r:
         print(f"the whole replay (EM, EKF, sequential EKF, UKF, both smoothers, quality, scoring) of "
               f"{r['replay_pings']:,} pings: {r['replay_s']:.2f} s, RMS error {r['replay_rms_m']:.3f} m")

@@ -38,6 +38,9 @@ def test_the_robust_track_of_a_small_record_is_the_tag_s_and_its_times_add_up():
     # the EKF's baseline (its TOA model called per ping as before): the same records to the last bit, its time beside
     assert r["ekf_rts_same"] is True and r["ekf_rts_baseline_per_ping_us"] > 0.0
     assert np.isclose(r["ekf_rts_ratio"], r["ekf_rts_per_ping_us"] / r["ekf_rts_baseline_per_ping_us"], rtol=1e-9)
+    # the bounds' baseline (a step's terms made inside the recursion as before): the same bounds to the last bit
+    assert r["bound_same"] is True and r["bound_per_ping_us"] > 0.0 and r["bound_baseline_per_ping_us"] > 0.0
+    assert np.isclose(r["bound_ratio"], r["bound_per_ping_us"] / r["bound_baseline_per_ping_us"], rtol=1e-9)
     for run in r["runs"]:
         base = run["baseline"]
         assert base["pings"] == run["pings"] and base["track_cpu_s"] > 0.0 and run["splice_cpu_s"] >= 0.0
