@@ -198,6 +198,7 @@ def test_the_map_at_the_centre_is_the_closed_form(n):
     assert drms == pytest.approx(2 * sigma / (math.sqrt(n) * math.sin(alpha)), rel=1e-9)
 
 
+@pytest.mark.slow  # 1.6 s, but each count a library of its own: 20-30 s of compiling each on a fresh machine
 def test_the_pcrb_of_a_run_takes_n_beacons():
     """The bound of a run follows the beacons of its layout: finite, and not the same for 3 and 8 beacons."""
     base = ["platform.layout=circle", "simulation.duration=20"]
