@@ -229,6 +229,7 @@ def test_a_latency_as_long_as_the_run_is_said_so(tmp_path, capsys):
     assert summary["fix_steps"] == 0 and summary["updates"] == 49  # the 50th range is in flight at the end
 
 
+@pytest.mark.slow  # 1 s once compiled; three LBL transponders a library of their own on a fresh machine
 def test_set_applies_over_the_compared_systems_defaults(tmp_path, capsys):
     """docs/systems-compare.md: --set applies over each system's defaults (the LBL circle takes
     platform.beacons = 3), in compare --systems and in map --compare platform.system, though the scenario's cross
