@@ -324,14 +324,13 @@ def pcrb(positions: np.ndarray, velocities: np.ndarray, emissions: np.ndarray, h
     intervals = np.diff(np.asarray(emissions, float))
     B = np.empty((m, s, s))
     Bp = np.empty((m, s, s))  # row k: the prediction of k from k − 1
-    Fs = np.tile(np.eye(s), (m, 1, 1))  # row k: the transition from k − 1 to k
     B[0] = np.linalg.inv(J)
     Bp[0] = B[0]
-    # every step's terms at once (they follow the true track, not the recursion); the recursion alone a step at a time
+    # every step's terms at once (they follow the true track, not the recursion); the recursion alone a step at a time:
+    # F[k], Q[k] the step from ping k to k + 1
     F, Q = transitions(velocities[:m - 1], intervals, motion) if schedule is None else \
         transitions(velocities[:m - 1], intervals, motion, schedule.count[:m - 1], schedule.te_sigma[:m - 1],
                     schedule.drift_sigma[:m - 1])
-    Fs[1:] = F
     Qi = np.linalg.inv(Q)
     FT = np.swapaxes(F, 1, 2)
     D11 = FT @ Qi @ F
