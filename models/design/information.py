@@ -142,8 +142,9 @@ def padded(beacons: np.ndarray, arms: np.ndarray, heard: np.ndarray, noise_varia
 
 
 def _widened(values: np.ndarray, slots: int, fill: float) -> np.ndarray:
-    """``values`` (..., n) in the first n of ``slots`` columns, the rest ``fill`` (numpy's pad, without its cost
-    a call: the design's search pads every candidate layout)."""
+    """``values`` (..., n) in the first n of ``slots`` columns, the rest ``fill``: numpy's pad, the same arrays,
+    without its overhead a call (the design's search pads every candidate layout; a few per cent of a layout's
+    evaluation in ``benchmarks/bench_design.py``)."""
     out = np.full(values.shape[:-1] + (slots,), fill)
     out[..., :values.shape[-1]] = values
     return out
