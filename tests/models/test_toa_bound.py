@@ -121,24 +121,24 @@ def test_the_pcrb_and_smoothing_bound_are_the_whole_tracks_information_inverted(
         block[np.ix_(idx, idx)] += info[k]
     whole[d:2 * d, d:2 * d] += np.eye(d) / motion.sigma_speed**2
     whole[s - 1, s - 1] += 1.0 / motion.sigma_interval**2
+    ahead = []  # each step's term on the block it leaves (Fᵀ Q⁻¹ F), which the filter there has not yet seen
     for k in range(m - 1):
         F, Q = tb.transition(velocities[k], emissions[k + 1] - emissions[k], motion, schedule.count[k],
                              schedule.te_sigma[k], schedule.drift_sigma[k])
         Qi = np.linalg.inv(Q)
         a, b = slice(k * s, (k + 1) * s), slice((k + 1) * s, (k + 2) * s)
-        whole[a, a] += F.T @ Qi @ F
+        ahead.append(F.T @ Qi @ F)
+        whole[a, a] += ahead[-1]
         whole[a, b] -= F.T @ Qi
         whole[b, a] -= Qi @ F
         whole[b, b] += Qi
     smoothed = np.linalg.inv(whole)
     for k in range(m):
-        # the filter's information on ping k is the first k + 1 pings' alone: the later pings' step terms
-        # on block k (Fᵀ Q⁻¹ F) are not in it
+        # the filter's information on ping k is the first k + 1 pings' alone: the next step's term on block k is not
+        # in it
         filtered_info = whole[:(k + 1) * s, :(k + 1) * s].copy()
         if k < m - 1:
-            F, Q = tb.transition(velocities[k], emissions[k + 1] - emissions[k], motion, schedule.count[k],
-                                 schedule.te_sigma[k], schedule.drift_sigma[k])
-            filtered_info[k * s:, k * s:] -= F.T @ np.linalg.inv(Q) @ F
+            filtered_info[k * s:, k * s:] -= ahead[k]
         filtered = np.linalg.inv(filtered_info)[k * s:, k * s:]
         np.testing.assert_allclose(bound.B_filtered[k], filtered, rtol=1e-6, atol=1e-15, err_msg=f"filtered {k}")
         np.testing.assert_allclose(bound.B_smoothed[k], smoothed[k * s:(k + 1) * s, k * s:(k + 1) * s], rtol=1e-6,
