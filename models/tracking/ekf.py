@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from sblsim.models.receiver.toa_bound import predict, process_noise
 from sblsim.models.tracking.fix import GATE_ONE, Fix, single_ping_fix
 from sblsim.models.tracking.schedule import PingSchedule
 from sblsim.models.tracking.toa import PingModel, checked_sigma, per_receiver
@@ -185,26 +184,30 @@ class ToaTracker:
         self.settings = settings
         self.size = 2 * self.dim + 2
         self._model = PingModel(self.receivers, settings.sound_speed)  # the TOA model and its Jacobian
-        self._eye = np.eye(self.size)
+        self._eye, self._eye_dim = np.eye(self.size), np.eye(self.dim)
         self._eyes = [np.eye(k) for k in range(self.n + 1)]  # the identities of 0 to n arrivals
         self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
         self._per_receiver = per_receiver(self._R)
+        from scipy.linalg import get_lapack_funcs
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
+        self._gesv = get_lapack_funcs("gesv", (self._eye,))
 
     def transition(self, x: np.ndarray, step: int | None = None, schedule: PingSchedule | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The prediction of the next ping: state (s,), the Jacobian F (s, s), the process noise Q (s, s), over the
         step ``step`` of ``schedule`` (:class:`~sblsim.models.tracking.schedule.PingSchedule`; default one stable
-        interval), its duration at the state's interval."""
+        interval), its duration at the state's interval: the same numbers as
+        :func:`~sblsim.models.receiver.toa_bound.predict` and :func:`~sblsim.models.receiver.toa_bound.process_noise`
+        of the one state."""
         s = self.settings
         if schedule is None or step is None:
             count, offset, te, drift = 1.0, 0.0, s.jitter, s.interval_drift
         else:
             count, offset = schedule.count[step], schedule.offset[step]
             te, drift = schedule.te_sigma[step], schedule.drift_sigma[step]
-        # :func:`predict` and :func:`process_noise` of one row, their operations on one state's numbers (the same
+        # toa_bound's predict and process_noise of one row, their operations on one state's numbers (the same
         # numbers to the last bit: each product and sum as those functions make it; T's powers on a one-element
         # array, as theirs are): called every ping, their arrays of one row cost the EKF a third of its loop
         d, q = self.dim, s.acceleration_psd
@@ -213,14 +216,14 @@ class ToaTracker:
         xp[:d] += T * x[d:2 * d]
         xp[-2] += T
         F = self._eye.copy()
-        F[:d, d:2 * d] = T * self._eyes[d]
+        F[:d, d:2 * d] = T * self._eye_dim
         F[:d, -1] = count * x[d:2 * d]
         F[-2, -1] = count
         steps = np.array([T])
         Q = np.zeros((self.size, self.size))
-        Q[:d, :d] = (q * steps**3 / 3)[0] * self._eyes[d]
-        Q[:d, d:2 * d] = Q[d:2 * d, :d] = (q * steps**2 / 2)[0] * self._eyes[d]
-        Q[d:2 * d, d:2 * d] = (q * steps)[0] * self._eyes[d]
+        Q[:d, :d] = (q * steps**3 / 3)[0] * self._eye_dim
+        Q[:d, d:2 * d] = Q[d:2 * d, :d] = (q * steps**2 / 2)[0] * self._eye_dim
+        Q[d:2 * d, d:2 * d] = (q * steps)[0] * self._eye_dim
         Q[-2, -2] = float(te) * float(te)
         Q[-1, -1] = float(drift) * float(drift)
         return xp, F, Q
@@ -264,6 +267,23 @@ class ToaTracker:
             P = A @ P @ A.T + self._gain_noise(K, used)
             P = 0.5 * (P + P.T)
         return x, P, used
+
+    def _solve(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """``a⁻¹ b`` for a gate's χ² (a small square ``a`` (k, k), ``b`` (k,)): LAPACK's ``gesv`` (LU with partial
+        pivoting, as :func:`numpy.linalg.solve`) called directly, without numpy's wrapper, whose checks cost a
+        filter's step several times the solve itself. For the gates' decisions alone: scipy's LAPACK is not
+        numpy's build, and the two may differ in a last bit, which moves a decision only on a χ² within a rounding
+        of its gate; the gain, which the state takes, keeps :func:`numpy.linalg.solve`.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            Where ``a`` is singular (as :func:`numpy.linalg.solve`).
+        """
+        x, info = self._gesv(a, b)[2:]
+        if info != 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return x
 
     def _noise(self, used: np.ndarray) -> np.ndarray:
         """The measurement covariance R [s²] of the arrivals ``used`` (n,) bool: ``σ² I``, or ``diag(σ_i²)`` with a
@@ -317,7 +337,7 @@ class ToaTracker:
 
     def _set_passes(self, used: np.ndarray, nu: np.ndarray, Su: np.ndarray) -> bool:
         """Whether the arrivals ``used`` (n,) pass the set's χ² test, ``Su`` their innovations' covariance [s²]."""
-        return float(nu[used] @ np.linalg.solve(Su, nu[used])) <= self._set_gate[int(used.sum()) - 1]
+        return float(nu[used] @ self._solve(Su, nu[used])) <= self._set_gate[int(used.sum()) - 1]
 
     def _fix_kept(self, toa: np.ndarray, used: np.ndarray, kept: np.ndarray | None) -> np.ndarray:
         """The arrivals ``used`` (n,) of a ping cut, with redundancy to spare (dim + 3 or more), to those its own
@@ -367,7 +387,7 @@ class ToaTracker:
                 if not segment and fixes is not None and np.isfinite(fixes[0][k]).all() and fixes[2][k] >= d + 2:
                     # an overdetermined single-ping fix far outside the prediction's ellipse: the filter may be lost
                     e = fixes[0][k] - x[:d]
-                    far = float(e @ np.linalg.solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
+                    far = float(e @ self._solve(P[:d, :d] + fixes[1][k][:d, :d], e)) > s.fix_gate
                     if fixes[2][k] >= d + 3:
                         disagree = disagree + 1 if far else 0
                     if not far:
@@ -380,7 +400,7 @@ class ToaTracker:
                             gap = fixes[0][k] - fixes[0][chain]
                             allowed = fixes[1][k][:d, :d] + fixes[1][chain][:d, :d] + \
                                 (s.fix_speed * (times[k] - times[chain])) ** 2 / s.fix_gate * np.eye(d)
-                            agreeing = agreeing + 1 if float(gap @ np.linalg.solve(allowed, gap)) <= s.fix_gate else 1
+                            agreeing = agreeing + 1 if float(gap @ self._solve(allowed, gap)) <= s.fix_gate else 1
                         else:
                             agreeing = 1
                         chain = k

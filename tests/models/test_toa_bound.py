@@ -144,3 +144,40 @@ def test_the_pcrb_and_smoothing_bound_are_the_whole_tracks_information_inverted(
         np.testing.assert_allclose(bound.B_smoothed[k], smoothed[k * s:(k + 1) * s, k * s:(k + 1) * s], rtol=1e-6,
                                    atol=1e-15, err_msg=f"smoothed {k}")
     np.testing.assert_allclose(bound.filtered, np.sqrt(np.trace(bound.B_filtered[:, :d, :d], axis1=1, axis2=2)))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_ekf_s_transition_is_the_motion_model_s_predict_and_process_noise_to_the_bit(dim):
+    """The EKF's one-step transition (made on one state's numbers, every ping) against the motion model's vectorised
+    functions of the same state (toa_bound's predict and process_noise, which the bound and the smoother use): the
+    same bytes, signed zeros included, over stable steps of 1 and 3 intervals, a burst's step of its own (count 0,
+    an offset), intervals and velocities of either sign, and the default schedule."""
+    from dataclasses import replace
+
+    from sblsim.models.tracking.schedule import PingSchedule
+
+    rng = np.random.default_rng(5)
+    receivers = rng.uniform(-100.0, 100.0, (2, dim))  # fewer receivers than axes in 3-D: the transition needs none
+    settings = replace(tt.TrackerSettings(sound_speed=C, sigma_toa=SIGMA, interval=2.5), acceleration_psd=3e-4)
+    tracker = tt.ToaTracker(receivers, settings)
+    steps = 6
+    schedule = replace(PingSchedule.stable(steps + 1, 2.5, settings.jitter, settings.interval_drift),
+                       count=np.array([1.0, 3.0, 0.0, 1.0, 0.0, 2.0]),
+                       offset=np.array([0.0, 0.0, 7.25, 0.0, 31.0, 0.0]),
+                       te_sigma=rng.uniform(1e-4, 1e-2, steps), drift_sigma=rng.uniform(1e-6, 1e-3, steps))
+    for trial in range(40):
+        x = rng.normal(0.0, 50.0, 2 * dim + 2)
+        x[-1] = rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 10.0) if trial % 4 == 0 else rng.uniform(0.5, 10.0)
+        for step in [None, *range(steps)]:
+            if step is None:
+                count, offset, te, drift = 1.0, 0.0, settings.jitter, settings.interval_drift
+                xp, F, Q = tracker.transition(x)
+            else:
+                count, offset = schedule.count[step], schedule.offset[step]
+                te, drift = schedule.te_sigma[step], schedule.drift_sigma[step]
+                xp, F, Q = tracker.transition(x, step, schedule)
+            want_x, want_F = tb.predict(x[None], dim, np.array([count]), np.array([offset]))
+            want_Q = tb.process_noise(np.array([count * float(x[-1]) + offset]), settings.acceleration_psd,
+                                      np.array([te]), np.array([drift]), dim)
+            for got, want in ((xp, want_x[0]), (F, want_F[0]), (Q, want_Q[0])):
+                assert got.shape == want.shape and got.tobytes() == want.tobytes(), (trial, step)
