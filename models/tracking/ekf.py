@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import get_lapack_funcs
 
 from sblsim.models.tracking.fix import GATE_ONE, Fix, single_ping_fix
 from sblsim.models.tracking.schedule import PingSchedule
@@ -188,7 +189,6 @@ class ToaTracker:
         self._eyes = [np.eye(k) for k in range(self.n + 1)]  # the identities of 0 to n arrivals
         self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
         self._per_receiver = per_receiver(self._R)
-        from scipy.linalg import get_lapack_funcs
         from scipy.stats import chi2
 
         self._set_gate = chi2.ppf(settings.gate_probability, np.arange(1, self.n + 1))
