@@ -91,15 +91,18 @@ def m_step(x: np.ndarray, P: np.ndarray, lag: np.ndarray, steps: np.ndarray, cou
     """
     predicted, F = predict(x[:-1], dim, count, offset)
     w = x[1:] - predicted
-    E = (np.einsum("ki,kj->kij", w, w) + P[1:] + np.einsum("kij,kjl,kml->kim", F, P[:-1], F)
-         - np.einsum("kij,klj->kil", lag, F) - np.einsum("kij,klj->kil", F, lag))
     T = np.asarray(steps, float)
     A = np.stack([np.stack([T**3 / 3, T**2 / 2], -1), np.stack([T**2 / 2, T], -1)], -2)
     Ai = np.linalg.inv(A)
     total = np.zeros(len(T))
-    for a in range(dim):
+    for a in range(dim):  # E's (position, velocity) block of the axis alone: each entry's products and sums those
+        # of the whole (s, s) E's entry, in about half its time; laid out as that block's gather lays it out (Fortran
+        # order), which decides the order of the trace's sum: the same numbers to the last bit
         axis = [a, dim + a]
-        total += np.einsum("kij,kji->k", Ai, E[:, axis][:, :, axis])
+        Fa, wa, lag_a = F[:, axis], w[:, axis], lag[:, axis]
+        E = (np.einsum("ki,kj->kij", wa, wa) + P[1:, axis][:, :, axis] + np.einsum("kij,kjl,kml->kim", Fa, P[:-1], Fa)
+             - np.einsum("kij,klj->kil", lag_a, Fa) - np.einsum("kij,klj->kil", Fa, lag_a))
+        total += np.einsum("kij,kji->k", Ai, np.asfortranarray(E))
     return float(total.mean() / (2 * dim))
 
 
