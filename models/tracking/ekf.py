@@ -187,6 +187,10 @@ class ToaTracker:
         self._model = PingModel(self.receivers, settings.sound_speed)  # the TOA model and its Jacobian
         self._eye, self._eye_dim = np.eye(self.size), np.eye(self.dim)
         self._eyes = [np.eye(k) for k in range(self.n + 1)]  # the identities of 0 to n arrivals
+        # without consider terms their covariance (:meth:`_consider_spread`) is zero: its diagonal and its blocks of 0
+        # to n arrivals made once, added as the zeros they are (the same sums, the same numbers)
+        self._considered = settings.survey_sigma is not None or bool(settings.sound_speed_sigma)
+        self._no_spread, self._zeros = np.zeros(self.n), [np.zeros((k, k)) for k in range(self.n + 1)]
         self._R = checked_sigma(settings.sigma_toa, self.n) ** 2  # [s²]: one, or each receiver's (n,)
         self._per_receiver = per_receiver(self._R)
         from scipy.stats import chi2
@@ -252,16 +256,20 @@ class ToaTracker:
         R = self._R
         nu = toa - model
 
-        W = self._consider_spread(model, x[-2])
+        if self._considered:
+            W = self._consider_spread(model, x[-2])
+            spread, block = np.diag(W), (lambda used: W[used][:, used])
+        else:
+            spread, block = self._no_spread, (lambda used: self._zeros[int(used.sum())])
 
         def S(used):
             Hu = H[used]
-            return Hu @ P @ Hu.T + self._noise(used) + W[used][:, used]
+            return Hu @ P @ Hu.T + self._noise(used) + block(used)
 
-        used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R + np.diag(W), S, kept)
+        used, Su = self._gated(toa, nu, np.einsum("ij,jk,ik->i", H, P, H) + R + spread, S, kept)
         if Su is not None:
             Hu = H[used]
-            K = np.linalg.solve(Su - W[used][:, used], Hu @ P).T
+            K = np.linalg.solve(Su - block(used), Hu @ P).T
             x = x + K @ nu[used]
             A = self._eye - K @ Hu
             P = A @ P @ A.T + self._gain_noise(K, used)
