@@ -74,7 +74,7 @@ def test_the_m_step_is_the_closed_form_of_the_expected_process_error():
     covariance inverted alone, the traces summed over the axes' (position, velocity) blocks) on random smoothed
     states, covariances and lag-one covariances in 2-D and 3-D; and to the last bit against the same expectation
     made as one (s, s) matrix a step and its blocks gathered (as the M-step was written first): its block of each axis
-    alone must be laid out as that gather lays it out, or the trace's sum moves a last bit (mutation checked: 2 of
+    alone must be laid out as that gather lays it out, or the trace's sum moves a last bit (mutation checked: 3 of
     these 40 cases)."""
     for seed in range(20):
         for dim in (2, 3):
