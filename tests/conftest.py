@@ -24,6 +24,29 @@ import pytest
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
+#: The numerical kernels every test and every command it starts uses, set before numpy loads: OpenBLAS's
+#: Haswell kernels (it otherwise picks them by the processor) and numpy's dispatch without AVX-512 (its X86_V4 group;
+#: the older numpy's names beside it). A run's last bits follow the kernels, and a few of the pages' figures follow
+#: decisions those bits move (docs/extending.md, "Figures a page quotes"): pinned, the pages print their figures on
+#: any x86-64 processor with AVX2 and FMA, the AVX-512 machines included (whatever the environment said).
+KERNELS = {"OPENBLAS_CORETYPE": "Haswell",
+           "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX "
+                                       "AVX512_CNL AVX512_ICL AVX512_SPR"}
+
+
+def _has_avx2_and_fma(cpuinfo: str | Path = "/proc/cpuinfo") -> bool:
+    """Whether the processor runs the Haswell kernels (Linux's flags of its first processor; False elsewhere)."""
+    try:
+        with open(cpuinfo, encoding="ascii", errors="replace") as info:
+            flags = next((line.split(":", 1)[1].split() for line in info if line.startswith("flags")), [])
+    except OSError:
+        return False
+    return {"avx2", "fma"} <= set(flags)
+
+
+if _has_avx2_and_fma():
+    os.environ.update(KERNELS)
+
 #: The units of work that take longest (measured with ``--durations``, docs/architecture.md), longest first: they
 #: start first. A file's tests and a group's keep their order; the other units follow in collection order, and
 #: the documentation site's build from the page runs' figures comes last (it waits for the page chains).
