@@ -4,28 +4,33 @@ processor (docs/extending.md, "Figures a page quotes")."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+import scipy.linalg  # noqa: F401  (its own OpenBLAS loaded, for threadpoolctl to find)
 from conftest import _has_avx2_and_fma
 from threadpoolctl import threadpool_info
 
 pinned = pytest.mark.skipif(not _has_avx2_and_fma(), reason="the processor has no AVX2 and FMA: numpy's and "
                             "OpenBLAS's own choice of kernels")
 
+#: numpy's table of its processor features and dispatch targets (numpy._core from numpy 2, numpy.core before)
+UMATH = f"numpy.{'_core' if int(np.__version__.split('.')[0]) >= 2 else 'core'}._multiarray_umath"
 PROBE = ("import numpy, scipy.linalg, json; from threadpoolctl import threadpool_info; "
-         "from numpy._core._multiarray_umath import __cpu_features__ as f, __cpu_dispatch__ as d; "
+         f"from {UMATH} import __cpu_features__ as f, __cpu_dispatch__ as d; "
          "print(json.dumps([sorted({i['architecture'] for i in threadpool_info() if i['internal_api'] == 'openblas'}),"
          " sorted(k for k in d if f[k] and ('512' in k or k == 'X86_V4'))]))")
 
 
 @pinned
 def test_this_process_runs_the_pinned_kernels():
-    import numpy  # noqa: F401  (loaded by now in any case; its OpenBLAS is the one threadpoolctl finds)
-    import scipy.linalg  # noqa: F401
-    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    from importlib import import_module
 
+    umath = import_module(UMATH)
+    __cpu_dispatch__, __cpu_features__ = umath.__cpu_dispatch__, umath.__cpu_features__
     blas = [i for i in threadpool_info() if i["internal_api"] == "openblas"]
     assert blas, "no OpenBLAS loaded by numpy and scipy"
     assert {i["architecture"] for i in blas} == {"Haswell"}, blas
@@ -35,8 +40,6 @@ def test_this_process_runs_the_pinned_kernels():
 
 @pinned
 def test_a_command_the_tests_start_runs_the_pinned_kernels():
-    import json
-
     done = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, check=True)
     assert json.loads(done.stdout) == [["Haswell"], []], done.stdout + done.stderr
 
