@@ -14,8 +14,10 @@ import scipy.linalg  # noqa: F401  (its own OpenBLAS loaded, for threadpoolctl t
 from conftest import _has_avx2_and_fma
 from threadpoolctl import threadpool_info
 
-pinned = pytest.mark.skipif(not _has_avx2_and_fma(), reason="the processor has no AVX2 and FMA: numpy's and "
-                            "OpenBLAS's own choice of kernels")
+#: The OpenBLAS libraries numpy and scipy loaded (none where they were built on another BLAS, MKL say)
+OPENBLAS = [i for i in threadpool_info() if i["internal_api"] == "openblas"]
+pinned = pytest.mark.skipif(not _has_avx2_and_fma() or not OPENBLAS, reason="the processor has no AVX2 and FMA "
+                            "(numpy's and OpenBLAS's own choice of kernels), or numpy and scipy use no OpenBLAS")
 
 #: numpy's table of its processor features and dispatch targets (numpy._core from numpy 2, numpy.core before)
 UMATH = f"numpy.{'_core' if int(np.__version__.split('.')[0]) >= 2 else 'core'}._multiarray_umath"
@@ -31,9 +33,7 @@ def test_this_process_runs_the_pinned_kernels():
 
     umath = import_module(UMATH)
     __cpu_dispatch__, __cpu_features__ = umath.__cpu_dispatch__, umath.__cpu_features__
-    blas = [i for i in threadpool_info() if i["internal_api"] == "openblas"]
-    assert blas, "no OpenBLAS loaded by numpy and scipy"
-    assert {i["architecture"] for i in blas} == {"Haswell"}, blas
+    assert {i["architecture"] for i in OPENBLAS} == {"Haswell"}, OPENBLAS
     # numpy's AVX-512 targets of dispatch (X86_V4 and the AVX512_* above it) are off; AVX2's (X86_V3) are not
     assert [k for k in __cpu_dispatch__ if __cpu_features__[k] and ("512" in k or k == "X86_V4")] == []
 
