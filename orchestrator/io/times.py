@@ -117,11 +117,14 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
     """
     import pandas as pd
 
+    plain = False  # every cell a PLAIN_TIME as it is: none to strip, none empty
     if isinstance(cells, pd.Series) and pd.api.types.is_string_dtype(cells) and not cells.isna().any():
-        text = cells.str.strip().reset_index(drop=True)  # a table's text cells: stripped as they are
+        text = cells.reset_index(drop=True)  # a table's text cells
+        plain = len(text) > 0 and bool(text.str.fullmatch(PLAIN_TIME.pattern).all())
+        text = text if plain else text.str.strip()
     else:
         text = pd.Series(cells, dtype=object).astype(str).str.strip().reset_index(drop=True)
-    empty = (text == "").to_numpy(bool)
+    empty = np.zeros(len(text), bool) if plain else (text == "").to_numpy(bool)
     if empty.any() and not missing:
         k = int(np.flatnonzero(empty)[0])
         raise _refuse(where, lines[k], column, "", ALLOWED)
@@ -129,11 +132,11 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
     seconds = np.full(len(text), np.nan)
     if not len(given):
         return seconds
-    if is_epoch(given):
+    if not plain and is_epoch(given):
         values = pd.to_numeric(given, errors="coerce").to_numpy(float)
     else:
         normal = given
-        if not given.str.fullmatch(PLAIN_TIME.pattern).all():  # else every cell ISO 8601 as pandas parses it
+        if not plain and not given.str.fullmatch(PLAIN_TIME.pattern).all():  # else ISO 8601 as pandas parses it
             iso = given.str.fullmatch(ISO_TIME.pattern).to_numpy(bool)
             if not iso.all():
                 k = int(given.index[np.flatnonzero(~iso)[0]])
