@@ -12,7 +12,7 @@ import pytest
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.readers.cells import per_value, text_table
 from sblsim.orchestrator.readers.detections import read_detections
-from sblsim.orchestrator.store import ingest as ingest_module
+from sblsim.orchestrator.store import reading as reading_module
 from sblsim.orchestrator.store import plain
 from sblsim.orchestrator.store.ingest import ingest
 from sblsim.orchestrator.store.plain import fathom_detections, plain_body
@@ -92,7 +92,7 @@ def test_a_file_of_plain_and_other_pieces_is_stored_as_the_whole_file_reader_rea
         parsed.append(got is not None)
         return got
 
-    monkeypatch.setattr(ingest_module, "plain_body", spy)
+    monkeypatch.setattr(reading_module, "plain_body", spy)
     ingest(path, tmp_path / "store", piece_bytes=4096)
     assert any(parsed) and not all(parsed)  # both readers used
     want = read_detections(path, None)
@@ -158,7 +158,7 @@ def test_a_fathom_file_with_sensor_records_and_odd_lines_is_stored_as_the_whole_
         plain_pieces.append(got is not None)
         return got
 
-    monkeypatch.setattr(ingest_module, "fathom_detections", spy)
+    monkeypatch.setattr(reading_module, "fathom_detections", spy)
     ingest(path, tmp_path / "store", piece_bytes=4096)
     assert any(plain_pieces) and not all(plain_pieces)
     want = read_detections(path, None)

@@ -1,0 +1,69 @@
+"""A file read a piece at a time on threads (:mod:`sblsim.orchestrator.store.reading`): the pieces taken in the
+file's order whatever thread ends first, the file's first fault the one named, the same store from one thread or
+several, each piece's codes and counts those of pandas."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.store import reading
+from sblsim.orchestrator.store.ingest import FILTERED, ingest
+from sblsim.orchestrator.telemetry.simulate import simulate_study, vue_text
+
+
+@pytest.fixture(scope="module")
+def lines() -> list[str]:
+    """A simulated VUE export's lines (about 40 pieces of 4 KiB)."""
+    d = simulate_study(n_receivers=4, n_tags=3, days=0.1, seed=8).detections.reset_index(drop=True)
+    return vue_text(d).splitlines()
+
+
+def test_the_files_first_fault_is_named_though_a_later_piece_is_refused_first(lines, tmp_path):
+    """A bad cell early and a NUL byte later: the pieces after the bad one are read (on threads) before its refusal is
+    taken, and the NUL byte is found by the reading of the file itself; the bad cell, first in the file, is named."""
+    early, late = len(lines) // 5, len(lines) // 5 + 50  # the next piece or the one after (of 4 KiB)
+    bad = list(lines)
+    bad[early] = bad[early].replace(",A69-", ",A69+", 1)
+    bad[late] = bad[late][:10] + "\0" + bad[late][10:]
+    path = tmp_path / "bad.csv"
+    path.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ModelError, match=f"line {early + 1} column Transmitter"):
+        ingest(path, tmp_path / "s", "vue", piece_bytes=4096)  # the format given: the file's head not sniffed
+    alone = list(lines)
+    alone[late] = bad[late]
+    path.write_text("\n".join(alone) + "\n")
+    with pytest.raises(ModelError, match="holds a NUL byte"):
+        ingest(path, tmp_path / "s", "vue", piece_bytes=4096)
+    assert not (tmp_path / "s").exists()
+
+
+def test_one_thread_or_several_store_the_same_bytes(lines, tmp_path, monkeypatch):
+    path = tmp_path / "d.csv"
+    path.write_text("\n".join(lines) + "\n")
+    stored = {}
+    for threads in (1, 2, 3):
+        monkeypatch.setattr(reading, "READING_THREADS", threads)
+        ingest(path, tmp_path / f"s{threads}", piece_bytes=4096)
+        stored[threads] = [f.read_bytes() for f in sorted((tmp_path / f"s{threads}" / "detections").glob("*.parquet"))]
+    assert len(stored[1]) > 10 and stored[1] == stored[2] == stored[3]
+    part = pq.ParquetFile(sorted((tmp_path / "s2" / "detections").glob("*.parquet"))[0])
+    group = part.metadata.row_group(0)
+    for k in range(group.num_columns):  # the queries' columns with statistics; text dictionary-encoded
+        column = group.column(k)
+        assert column.is_stats_set == (column.path_in_schema in FILTERED), column.path_in_schema
+        text = str(part.schema_arrow.field(column.path_in_schema).type) in ("string", "large_string")
+        assert ("PLAIN_DICTIONARY" in column.encodings or "RLE_DICTIONARY" in column.encodings) == text
+
+
+def test_a_pieces_codes_count_its_rows_as_pandas_does():
+    frame = pd.DataFrame({"receiver": pd.Series(["b", "a", "b", None, "c", "b"], dtype="str"),
+                          "tag": pd.Series(["t1", "t2", "t1", "t1", "t3", "t2"], dtype="str")})
+    coded = reading.coded_piece(frame)
+    for column, which in (("receiver", "receivers"), ("tag", "tags")):
+        codes, names = getattr(coded, which)
+        assert coded.counts(which) == frame[column].value_counts().to_dict()
+        np.testing.assert_array_equal(np.array(names, object)[codes[codes >= 0]], frame[column].dropna().to_numpy())
