@@ -60,9 +60,9 @@ from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
 from sblsim.orchestrator.store.reading import Coded, NotUtf8, coded_piece, frames
 
-#: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract peaked at
-#: 0.37-0.38 GiB with it, one piece read while the one before is written; with pandas' parse alone 0.31-0.33 GiB,
-#: 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB).
+#: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract of a week
+#: peaked at 0.39-0.48 GiB with it, two pieces read at once while the one before them is written; 0.37-0.38 GiB with
+#: one; with pandas' parse alone 0.31-0.33 GiB, 0.41-0.49 GiB with 16 MiB, 0.26-0.27 GiB with 4 MiB, one at once).
 PIECE_BYTES = 8 * 2**20
 #: The smallest piece allowed [bytes].
 MIN_PIECE_BYTES = 4096

@@ -12,8 +12,8 @@ import pytest
 from sblsim.orchestrator.io.times import utc_seconds
 from sblsim.orchestrator.readers.cells import per_value, text_table
 from sblsim.orchestrator.readers.detections import read_detections
-from sblsim.orchestrator.store import reading as reading_module
 from sblsim.orchestrator.store import plain
+from sblsim.orchestrator.store import reading as reading_module
 from sblsim.orchestrator.store.ingest import ingest
 from sblsim.orchestrator.store.plain import fathom_detections, plain_body
 from sblsim.orchestrator.store.query import Store
