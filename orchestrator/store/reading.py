@@ -226,13 +226,13 @@ def _after_pieces_read(source: Iterator[tuple[bytes, int]], queue: deque[Future]
 
 
 def frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, progress: Progress
-            ) -> Iterator[tuple[pd.DataFrame, list[str], set[int], Coded]]:
+           ) -> Iterator[tuple[pd.DataFrame, list[str], set[int], Coded]]:
     """Each piece's detections (the format's reader), its header, the header's columns used and its receivers and
-    tags coded (:func:`coded_piece`), in the file's order;
-    a piece of a table of one row a line, UTF-8 and :mod:`.plain`, parsed by Arrow's CSV reader, every other by the
-    text reader. :data:`READING_THREADS` pieces are read at once on threads (their cells' checks are Arrow's kernels,
-    which free the GIL), a piece's refusal raised in the file's order; a Fathom piece that is not plain is read in
-    this thread, in order (its ``_DESC`` lines are in force for the pieces after it)."""
+    tags coded (:func:`coded_piece`), in the file's order; a piece of a table of one row a line, UTF-8 and
+    :mod:`.plain`, parsed by Arrow's CSV reader, every other by the text reader. :data:`READING_THREADS` pieces are
+    read at once on threads (their cells' checks are Arrow's kernels, which free the GIL), a piece's refusal raised
+    in the file's order; a Fathom piece that is not plain is read in this thread, in order (its ``_DESC`` lines are
+    in force for the pieces after it), its refusal raised in its turn too."""
     name = str(path)
     with open(path, "rb") as handle, ThreadPoolExecutor(READING_THREADS) as pool:
         first = handle.readline(MAX_LINE_BYTES + 2)
@@ -253,8 +253,11 @@ def frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pro
                     queue.append(pool.submit(_with_codes, _table_piece, format, head, header, descs, piece, line, name,
                                              encoding))
                 elif (found := fathom_detections(piece) if encoding == "utf-8" and "DET" in descs else None) is None:
-                    done: Future = Future()
-                    done.set_result(_with_codes(_text_piece, format, head, descs, piece, line, name, encoding))
+                    done: Future = Future()  # read here, its refusal raised in its turn as a thread's is
+                    try:
+                        done.set_result(_with_codes(_text_piece, format, head, descs, piece, line, name, encoding))
+                    except (ModelError, NotUtf8) as exc:
+                        done.set_exception(exc)
                     queue.append(done)
                 else:
                     carried = tuple(descs[record] for record in fathom.FATHOM_RECORDS if record in descs)

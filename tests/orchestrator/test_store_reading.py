@@ -12,7 +12,7 @@ import pytest
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.store import reading
 from sblsim.orchestrator.store.ingest import FILTERED, ingest
-from sblsim.orchestrator.telemetry.simulate import simulate_study, vue_text
+from sblsim.orchestrator.telemetry.simulate import fathom_text, simulate_study, vue_text
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +39,28 @@ def test_the_files_first_fault_is_named_though_a_later_piece_is_refused_first(li
     with pytest.raises(ModelError, match="holds a NUL byte"):
         ingest(path, tmp_path / "s", "vue", piece_bytes=4096)
     assert not (tmp_path / "s").exists()
+
+
+def test_a_fathom_piece_read_in_order_refuses_in_its_turn(tmp_path):
+    """A Fathom piece that is not plain (a quoted cell) is read in the command's own thread as it comes, while the
+    plain pieces before it are still on their threads: a bad cell in one of those is named first all the same."""
+    d = simulate_study(n_receivers=4, n_tags=3, days=0.1, seed=8).detections.reset_index(drop=True)
+    lines = fathom_text(d).splitlines()
+    early = next(k for k in range(len(lines) // 5, len(lines)) if lines[k].startswith("DET,"))
+    late = next(k for k in range(early + 40, len(lines)) if lines[k].startswith("DET,"))
+    lines[early] = lines[early].replace(",A69-", ",A69+", 1)
+    cells = lines[late].split(",")
+    k = next(k for k, cell in enumerate(cells) if cell.startswith("A69-"))
+    cells[k] = '"' + cells[k].replace("A69-", "A69+") + '"'  # quoted (the piece not plain) and bad
+    lines[late] = ",".join(cells)
+    path = tmp_path / "bad.csv"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ModelError, match=f"line {early + 1} "):
+        ingest(path, tmp_path / "s", "fathom", piece_bytes=4096)
+    lines[early] = lines[early].replace(",A69+", ",A69-", 1)  # the late one alone: it is refused
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ModelError, match=f"line {late + 1} "):
+        ingest(path, tmp_path / "s", "fathom", piece_bytes=4096)
 
 
 def test_one_thread_or_several_store_the_same_bytes(lines, tmp_path, monkeypatch):
