@@ -58,7 +58,7 @@ from sblsim.orchestrator.readers.detections import (
 )
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
-from sblsim.orchestrator.store.reading import Coded, NotUtf8, coded_piece, frames
+from sblsim.orchestrator.store.reading import Coded, NotUtf8, frames
 
 #: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract of a week
 #: peaked at 0.39-0.48 GiB with it, two pieces read at once while the one before them is written; 0.37-0.38 GiB with
@@ -88,13 +88,12 @@ class ClockParts:
         self.tags: dict[tuple[str, int], set] = {}
         self.resets: list[dict] = []
 
-    def add(self, frame: pd.DataFrame, coded: Coded | None = None) -> None:
+    def add(self, frame: pd.DataFrame, coded: Coded) -> None:
         """Set ``frame["clock_part"]`` (in place) for a piece's rows, in the file's order (each receiver's rows found
-        by its code: numpy's passes, not a group's Python objects); ``coded``: the piece's codes (:func:`coded_piece`)
-        where its reader made them."""
+        by its code: numpy's passes, not a group's Python objects); ``coded``: the piece's codes, as its reading
+        thread made them (:func:`~.reading.coded_piece`)."""
         time = frame["time"].to_numpy(float)
         lines = frame["line"].to_numpy(np.int64)
-        coded = coded or coded_piece(frame)
         codes, names = coded.receivers
         n = len(frame)
         order = np.argsort(codes, kind="stable")  # each receiver's rows together, in the file's order
