@@ -164,7 +164,7 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
             span = [min(span[0], float(frame["time"].min())), max(span[1], float(frame["time"].max()))]
             if written is not None:
                 written.result()  # one piece in writing at a time: the memory of two pieces at most
-            written = writer.submit(_write_part, frame, folder / f"part-{files:05d}.parquet")
+            written = writer.submit(_write_part, frame, folder / f"part-{files:05d}.parquet", coded)
             files += 1
         if written is not None:
             written.result()
@@ -179,10 +179,12 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
             "tags": dict(sorted(tags.items())), "receivers": dict(sorted(receivers.items()))}
 
 
-def _write_part(frame: pd.DataFrame, path: Path) -> None:
-    """A piece's detections written as one Parquet file, its rows by tag, then line (the module docstring)."""
-    codes, _ = pd.factorize(frame["tag"], sort=True)
-    order = np.lexsort((frame["line"].to_numpy(np.int64), codes))
+def _write_part(frame: pd.DataFrame, path: Path, coded: Coded) -> None:
+    """A piece's detections written as one Parquet file, its rows by tag, then line (the module docstring); the
+    tags' order from the piece's codes (``coded``: each code's rank among the names, a tag left empty first)."""
+    codes, names = coded.tags
+    rank = np.argsort(np.argsort(np.array(names, dtype=object), kind="stable"))
+    order = np.lexsort((frame["line"].to_numpy(np.int64), np.where(codes >= 0, rank[codes], -1)))
     table = pa.Table.from_pandas(frame, preserve_index=False).take(order)
     text = [field.name for field in table.schema if pa.types.is_string(field.type) or
             pa.types.is_large_string(field.type)]

@@ -72,6 +72,9 @@ def test_one_thread_or_several_store_the_same_bytes(lines, tmp_path, monkeypatch
         ingest(path, tmp_path / f"s{threads}", piece_bytes=4096)
         stored[threads] = [f.read_bytes() for f in sorted((tmp_path / f"s{threads}" / "detections").glob("*.parquet"))]
     assert len(stored[1]) > 10 and stored[1] == stored[2] == stored[3]
+    for file in sorted((tmp_path / "s2" / "detections").glob("*.parquet")):  # each part's rows by tag, then line
+        rows = pq.read_table(file, columns=["tag", "line"]).to_pylist()
+        assert [(r["tag"], r["line"]) for r in rows] == sorted((r["tag"], r["line"]) for r in rows)
     part = pq.ParquetFile(sorted((tmp_path / "s2" / "detections").glob("*.parquet"))[0])
     group = part.metadata.row_group(0)
     for k in range(group.num_columns):  # the queries' columns with statistics; text dictionary-encoded
