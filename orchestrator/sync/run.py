@@ -51,6 +51,8 @@ from sblsim.orchestrator.sync.refined_positions import _identify, _kept, _positi
 from sblsim.orchestrator.sync.survey_seen import seen_survey_error
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
 
+#: The detections' columns the synchronisation copies with its rows (others, as a VUE export's sensor values, not).
+SYNC_COLUMNS = ("receiver", "serial", "tag", "time", "line", "clock_part", "species")
 #: A bin with fewer kept arrivals than this at a receiver is bridged by the drift model (flagged).
 MIN_BIN_ARRIVALS = 5
 #: The bins' allowed width [h].
@@ -259,7 +261,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
             notes.append("tags labelled Sync without a receiver row (position unknown), left out: "
                          + ", ".join(sorted(labelled)[:20]))
     pick = frame["tag"].isin(tag_index).to_numpy() & frame["receiver"].isin(index).to_numpy()
-    sync = frame[pick]
+    sync = frame.loc[pick, [c for c in frame.columns if c in SYNC_COLUMNS]]  # a season's other columns never copied
     if len(sync) < 2:
         raise ModelError("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
                          "detections in which receivers hear the sync tags named in the table's sync_tag column")
@@ -296,8 +298,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                           emission, duplicate, positions, sound_speed, series, alternatives or {})
 
     if sound_speed is not None:
-        slowness = np.full(len(time), 1.0 / sound_speed)
-        speed_source = "given"
+        slowness, speed_source = np.full(len(time), 1.0 / sound_speed), "given"
     elif series is not None:
         times, speeds = series
         absolute = time + origin
@@ -307,8 +308,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         slowness = 1.0 / np.interp(absolute, times, speeds)
         speed_source = "series"
     else:
-        slowness = None
-        speed_source = "estimated"
+        slowness, speed_source = None, "estimated"
 
     counts = np.bincount(receiver[used], minlength=n_receivers)
     if reference is None:
@@ -497,4 +497,4 @@ def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int],
             if (r["receiver"], r["clock_part"]) in named}
 
 
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SyncOutcome", "corrected_times", "synchronise"]
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SYNC_COLUMNS", "SyncOutcome", "corrected_times", "synchronise"]

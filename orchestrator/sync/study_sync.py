@@ -23,7 +23,7 @@ from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
 from sblsim.orchestrator.readers.sound_speed import read_sound_speed
 from sblsim.orchestrator.store.read import is_store, read_any
-from sblsim.orchestrator.sync.run import SyncOutcome, synchronise
+from sblsim.orchestrator.sync.run import SYNC_COLUMNS, SyncOutcome, synchronise
 
 
 def rounding_warning(detections: Detections, hydrophones: pd.DataFrame, sound_speed: float | None,
@@ -96,6 +96,7 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     deployments = read_deployments(receivers, crs, frame)
     if store:
         data = read_any(detections, format, tags=set(deployments.table["sync_tag"]) - {""})
+        data.frame = data.frame[[c for c in data.frame.columns if c in SYNC_COLUMNS]]  # what the sync reads alone
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     # the table's positions against the sync tags' clock-free travel times (another unit refused, a table slightly
     # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)

@@ -28,6 +28,7 @@ from sblsim.orchestrator.readers.assign import SET_ASIDE, Assigned, assign, noth
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import NETWORKS, Detections
 from sblsim.orchestrator.store.read import read_any
+from sblsim.orchestrator.sync.run import SYNC_COLUMNS
 from sblsim.orchestrator.telemetry.report.daily import DAILY_COLUMNS, daily_counts
 
 #: The most detections a store's batch of tags holds [1] (a tag with more is a batch alone): its reading and
@@ -194,7 +195,9 @@ class StudyDetections:
             hydrophones = got.hydrophones
             labels = set(hydrophones["sync_tag"]) - {""}
             frame = got.detections.frame
-            sync.append(frame[frame["tag"].isin(labels)])
+            # the columns the synchronisation reads alone: a season's sync-tag rows are held through the study
+            held = [c for c in frame.columns if c in SYNC_COLUMNS]
+            sync.append(frame.loc[frame["tag"].isin(labels).to_numpy(), held])
         tally = Tally.merged(parts)
         if not tally.used:  # said as of the whole file
             raise nothing_kept(self.data.source, tally.serials, deployments)
