@@ -19,6 +19,7 @@ import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.memory import release
 from sblsim.orchestrator.io.times import MAX_EPOCH, TIME_SPAN
 from sblsim.orchestrator.readers import network
 from sblsim.orchestrator.readers.detections import LOGGED, NETWORKS, SORTED, Detections
@@ -195,7 +196,7 @@ class Store:
         table = table.take(pc.sort_indices(table, [("line", "ascending")]))
         frame = table.to_pandas(split_blocks=True, self_destruct=True)
         del table
-        pa.default_memory_pool().release_unused()  # the read's buffers back to the system (a season's: 0.19 GiB)
+        release()  # the read's buffers back to the system (a season's sync-tag rows: 0.19 GiB)
         time = frame["time"].to_numpy(float)
         bad = ~np.isfinite(time) | (time < 0) | (time > MAX_EPOCH)
         if bad.any():

@@ -22,6 +22,7 @@ from sblsim.models.sync.scale import SPEED_TOLERANCE
 from sblsim.models.sync.season import clocks_in_windows
 from sblsim.models.sync.windows import Windows
 from sblsim.models.tracking.still_tag import place_score, still_tag, survey_cross
+from sblsim.orchestrator.io.memory import release
 from sblsim.orchestrator.sync import segments
 
 #: ``sync_tags.csv``'s columns of each left-out sync tag's one place (:func:`_still_place`): ``place_x_m``,
@@ -71,6 +72,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
         if mine.sum() < dim + 2:
             continue
         this = fit
+        release()  # the last tag's freed buffers back to the system, not kept tag after tag
         if leave_one_out:
             got = fits[i] if fits is not None and i in fits else _fit_without(
                 i, fit, c, tag, emission, time, distance, slowness, used, start, width, len(linked), geometry,
