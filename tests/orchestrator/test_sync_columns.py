@@ -1,6 +1,6 @@
 """The synchronisation copies and holds the sync tags' rows with :data:`~sblsim.orchestrator.sync.run.SYNC_COLUMNS`
 alone (a VUE export's sensor values, code space, model and station not): ``sblsim sync`` on a store (its rows read
-with those columns) gives the clocks, residuals and sync tags that the same export read whole gives."""
+with those columns) gives the clocks and the residuals that the same export read whole gives."""
 
 from __future__ import annotations
 
