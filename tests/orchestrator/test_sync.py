@@ -16,6 +16,12 @@ import sblsim
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.orchestrator.cli import main
 from sblsim.orchestrator.cosim.config import ConfigError
+from sblsim.orchestrator.readers.deployments import read_deployments
+from sblsim.orchestrator.readers.detections import read_detections
+from sblsim.orchestrator.store.ingest import ingest
+from sblsim.orchestrator.sync.run import SYNC_COLUMNS
+from sblsim.orchestrator.sync.study_sync import synchronise_files, synchronise_study
+from sblsim.orchestrator.telemetry.simulate import simulate_study
 
 BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 #: The simulated files' epoch [s since 1970 UTC] (the clocks' τ = 0).
@@ -401,3 +407,20 @@ def test_each_receivers_survey_error_in_the_sync_tags_scores():
     with pytest.raises(TypeError, match="one prior"):
         synchronise(Detections(frame, "simulated", "yaps"), hydrophones, sound_speed=sim.sound_speed,
                     refine_positions=True, survey_sigma={home: 2.0})
+
+
+@pytest.mark.slow  # the sync of the store with its sync tags left out in turn: about 3 s
+def test_the_sync_of_a_store_equals_the_sync_of_its_file_read_whole(tmp_path):
+    """The synchronisation copies and holds the sync tags' rows with ``SYNC_COLUMNS`` alone (a VUE export's sensor
+    values, code space, model and station not): ``sblsim sync`` on a store (its rows read with those columns) gives
+    the clocks and the residuals that the same export read whole gives."""
+    written = simulate_study(n_receivers=5, n_tags=1, days=0.15, seed=3).write(tmp_path / "study", "vue")
+    ingest(written["detections"], tmp_path / "store")
+    whole = read_detections(written["detections"], None)
+    assert {"sensor_value", "code_space", "station"} <= set(whole.frame.columns) - set(SYNC_COLUMNS)
+    want = synchronise_study(whole, read_deployments(written["deployments"]), leave_one_out=False)
+    got = synchronise_files(tmp_path / "store", written["deployments"], None, None, None, 1.0, None)
+    assert len(got.residuals) == len(want.residuals) > 200
+    pd.testing.assert_frame_equal(got.offsets, want.offsets)
+    pd.testing.assert_frame_equal(got.residuals, want.residuals)
+    assert got.summary["synchronised"] == want.summary["synchronised"]
