@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -171,17 +172,23 @@ class Store:
         return self.detections(tags, receivers, start, end).frame
 
     def detections(self, tags: list[str] | None = None, receivers: list[str] | None = None,
-                   start: float | None = None, end: float | None = None) -> Detections:
+                   start: float | None = None, end: float | None = None,
+                   columns: Sequence[str] | None = None) -> Detections:
         """:meth:`frame`'s rows as :class:`~sblsim.orchestrator.readers.detections.Detections`, with the exact
         duplicates dropped among them and the reader's notes (the whole store: what
         :func:`~sblsim.orchestrator.readers.detections.read_detections` reads from the file, but its ``source``: the
-        file's name)."""
+        file's name); ``columns``: only these are read from the Parquet files and kept (None: all), besides
+        ``receiver``, ``tag``, ``time``, ``line`` and ``clock_part``, which every store's detections hold (and, read
+        but not kept, the receivers' notes a network extract's are said by)."""
         info = self.info
         try:  # a column only some pieces have (a receiver's note) is in the dataset's schema, empty elsewhere
             if self._dataset is None:  # every file's footer read once, not at each tag's query
                 schema = pa.unify_schemas([pq.read_schema(f) for f in self.files])
                 self._dataset = ds.dataset([str(f) for f in self.files], schema=schema, format="parquet")
-            table = self._dataset.to_table(filter=self._filter(tags, receivers, start, end))
+            kept = None if columns is None else {*columns, *_COLUMNS, "clock_part"}
+            read = None if kept is None else [c for c in self._dataset.schema.names
+                                              if c in kept or c in ("clock_part", "receiver_note")]
+            table = self._dataset.to_table(columns=read, filter=self._filter(tags, receivers, start, end))
         except Exception as exc:  # pyarrow's errors of a damaged file
             raise ModelError(f"store: {str(self.folder)!r}: its detections cannot be read "
                              f"({' '.join(str(exc).split())[:160]})") from None
@@ -212,6 +219,8 @@ class Store:
         duplicates, notes = 0, []
         if info["format"] in NETWORKS:
             frame, duplicates, notes = network.ordered(frame)
+        if kept is not None:
+            frame = frame[[c for c in frame.columns if c in kept]]
         return Detections(frame, str(info["source"]), info["format"], list(info["ignored_columns"]),
                           [dict(r) for r in info["clock_resets"]], info["row_order"], duplicates, notes)
 

@@ -5,7 +5,7 @@ reserved at import) are loaded only where a store is read."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Sequence
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.detections import Detections, read_detections
@@ -20,11 +20,14 @@ def is_store(path: str | Path) -> bool:
     return path.is_dir() and (path / STORE_FILE).is_file()
 
 
-def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | None = None) -> Detections:
+def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | None = None,
+             columns: Sequence[str] | None = None) -> Detections:
     """A detections file read whole (:func:`~sblsim.orchestrator.readers.detections.read_detections`, within its
     limits), or a store's detections (:meth:`~.query.Store.detections`: no row limit but memory), as one table; of a
     store, where ``tags`` are given, those tags' rows alone (each found among the store's tags as an id or a full ID:
-    :func:`~sblsim.orchestrator.readers.transmitters.match`; a name it does not hold, or holds twice, reads nothing).
+    :func:`~sblsim.orchestrator.readers.transmitters.match`; a name it does not hold, or holds twice, reads nothing),
+    and where ``columns`` are given, those columns alone read from its files (with the ones every store holds:
+    :meth:`~.query.Store.detections`); a file read whole keeps every column.
 
     Raises
     ------
@@ -47,7 +50,7 @@ def read_any(path: str | Path, format: str | None = None, tags: Iterable[str] | 
         raise ModelError(f"tag: {', '.join(asked[:8])} {'is' if len(asked) == 1 else 'are'} never detected in the "
                          f"store {str(path)!r}; allowed: one of {', '.join(store.tags[:8])}"
                          + (f" ({len(store.tags)} tags)" if len(store.tags) > 8 else ""))
-    detections = store.detections(tags=keys)
+    detections = store.detections(tags=keys, columns=columns)
     detections.source = f"{path} (the store of {store.info.get('source')})"
     return detections
 

@@ -95,8 +95,8 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     data = None if store else read_any(detections, format)
     deployments = read_deployments(receivers, crs, frame)
     if store:
-        data = read_any(detections, format, tags=set(deployments.table["sync_tag"]) - {""})
-        data.frame = data.frame[[c for c in data.frame.columns if c in SYNC_COLUMNS]]  # what the sync reads alone
+        # the columns the synchronisation reads alone, the others never read from the store's files
+        data = read_any(detections, format, tags=set(deployments.table["sync_tag"]) - {""}, columns=SYNC_COLUMNS)
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     # the table's positions against the sync tags' clock-free travel times (another unit refused, a table slightly
     # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)

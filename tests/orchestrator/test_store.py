@@ -95,6 +95,11 @@ def test_the_store_holds_what_the_whole_file_reader_reads(detections, tmp_path, 
     assert sorted(store.tags) == sorted(tags.index)
     one = tags.index[0]  # a tag read alone: the whole file's rows of that tag, in their order
     pd.testing.assert_frame_equal(store.frame(tags=[one]), want.frame[want.frame["tag"] == one].reset_index(drop=True))
+    narrow = store.detections(columns=["serial"])  # a few columns read from the files: the whole file's, narrowed
+    keep = [c for c in want.frame.columns if c in ("serial", "receiver", "tag", "time", "line", "clock_part")]
+    assert len(keep) < len(want.frame.columns)
+    pd.testing.assert_frame_equal(narrow.frame, want.frame[keep])
+    assert narrow.duplicates == want.duplicates and narrow.notes == want.notes
 
 
 def test_a_time_window_and_receivers_read_alone(detections, tmp_path):
