@@ -45,6 +45,7 @@ def test_a_plain_piece_is_the_text_readers_cells_and_lines():
     '2024-06-03 00:00:28,"VR2AR-461000",A69-1602-1049,,,\n',  # a quote
     ROWS[0] + "\r\n" + ROWS[1] + "\r\n",  # carriage returns
     ROWS[0] + "\n\n" + ROWS[1] + "\n",  # a blank line (the text reader skips it: the lines differ)
+    "\n" + ROWS[0] + "\n" + ROWS[1] + "\n",  # a blank line first
     ROWS[0] + "\n ,  ,,,,\n" + ROWS[1] + "\n",  # a row of blank cells (dropped by the text reader)
     ROWS[0] + "\n2024-06-03 00:00:28,VR2AR-461000,A69-1602-1049\n",  # a short row (padded by the text reader)
     ROWS[0] + ",extra\n",  # a long row (refused by the text reader)
@@ -132,9 +133,12 @@ def test_a_fathom_piece_is_reduced_to_its_detections_lines():
     assert data.decode().splitlines() == [lines[k] for k in (0, 2, 5)]
     assert fathom_detections(("\n".join(lines)).encode())[1].tolist() == [0, 2, 5]  # no last line end
     for other in ("DET_SENS,2024-06-03 00:00:28,461000,A69-1602-1049,4.5,m", "DET_DESC,Device Time (UTC)",
-                  'DET,"2024-06-03 00:00:28",VR2AR,461000,A69-1602-1049', "TEMP" + ",1" * 600):
+                  'DET,"2024-06-03 00:00:28",VR2AR,461000,A69-1602-1049', "TEMP" + ",1" * 600, ""):  # "": blank
         assert fathom_detections(("\n".join(lines[:2] + [other] + lines[2:]) + "\n").encode()) is None
     assert fathom_detections(b"TEMP,1,2\nTEMP,3,4\n") is None  # no detection: the text reader's
+    assert fathom_detections(("\n" + "\n".join(lines) + "\n").encode()) is None  # a blank line first
+    short = fathom_detections(b"DET,1\nD\nDE\nDET\nDET,2\nDE")  # lines shorter than a record's name, one last
+    assert short[0] == b"DET,1\nDET,2\n" and short[1].tolist() == [0, 4]
 
 
 def test_a_fathom_file_with_sensor_records_and_odd_lines_is_stored_as_the_whole_file_reader_reads_it(
