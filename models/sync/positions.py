@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import itertools
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy.special import chdtri, ndtri
@@ -62,6 +62,9 @@ W_CRITICAL = float(-ndtri(TEST_SIZE / 2))
 LEAVE_OUT_MAX = 12
 #: The most (emission, start) rows solved at once (bounds the memory: rows × receivers × (dim + 1) doubles).
 CHUNK = 20000
+#: The emissions positioned at once [1] (each one's fix its own: a sync tag's season a block at a time, its
+#: (emissions, starts, receivers) arrays a block's: :func:`position_emissions`).
+EMISSIONS_BLOCK = 4096
 #: A fix's status: trusted; its arrivals fitted exactly (redundancy 0); fewer than dim + 1 arrivals; the overall
 #: test failed with a redundancy of 1; no converged solution.
 CHECKED, UNCHECKED, TOO_FEW, FAILED, NOT_CONVERGED = "checked", "unchecked", "too few", "failed", "not converged"
@@ -316,11 +319,24 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
     receivers = np.asarray(receivers, float)
     sigma, slowness = np.asarray(sigma, float), np.asarray(slowness, float)
     E, R = arrival.shape
-    dim = receivers.shape[1]
     if receivers.shape[0] != R or sigma.shape != (R,) or slowness.shape != (E,):
         raise ValueError("position_emissions: arrival (E, R), receivers (R, dim), sigma (R,), slowness (E,)")
+    cols = np.flatnonzero(np.isfinite(arrival).any(axis=0))  # only the receivers that hear this tag
+    if E <= EMISSIONS_BLOCK:
+        return _positioned(arrival, cols, receivers, sigma, slowness)
+    # each emission's fix its own: a block of emissions at a time, the memory of a block's (E, S, R) arrays
+    blocks = [_positioned(arrival[lo:lo + EMISSIONS_BLOCK], cols, receivers, sigma, slowness[lo:lo + EMISSIONS_BLOCK])
+              for lo in range(0, E, EMISSIONS_BLOCK)]
+    return Fixes(*(np.concatenate([getattr(b, f.name) for b in blocks]) for f in fields(Fixes)))
+
+
+def _positioned(arrival: np.ndarray, cols: np.ndarray, receivers: np.ndarray, sigma: np.ndarray,
+                slowness: np.ndarray) -> Fixes:
+    """:func:`position_emissions` of the emissions ``arrival`` (E, R) on the receivers ``cols`` (those that hear
+    the tag at all)."""
+    E, R = arrival.shape
+    dim = receivers.shape[1]
     heard = np.isfinite(arrival)
-    cols = np.flatnonzero(heard.any(axis=0))  # only the receivers that hear this tag
     a, mask0, rec, sig = np.where(heard, arrival, 0.0)[:, cols], heard[:, cols], receivers[cols], sigma[cols]
     count0 = mask0.sum(axis=1)
     starts = _starts(mask0, rec)
@@ -411,5 +427,6 @@ def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.nda
                  count0 - mask.sum(axis=1))
 
 
-__all__ = ["AMBIGUOUS", "CHECKED", "CHUNK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP", "NOT_CONVERGED", "NU",
-           "RCOND", "TEST_SIZE", "TOO_FEW", "UNCHECKED", "UNDETERMINED", "W_CRITICAL", "position_emissions"]
+__all__ = ["AMBIGUOUS", "CHECKED", "CHUNK", "EMISSIONS_BLOCK", "FAILED", "Fixes", "ITERATIONS", "MAX_STEP",
+           "NOT_CONVERGED", "NU", "RCOND", "TEST_SIZE", "TOO_FEW", "UNCHECKED", "UNDETERMINED", "W_CRITICAL",
+           "position_emissions"]

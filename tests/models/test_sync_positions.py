@@ -208,3 +208,30 @@ def test_no_emission_and_emissions_heard_by_none_give_no_fix():
     assert empty.position.shape == (0, 2) and empty.ok.shape == (0,)
     none = position_emissions(np.full((2, 4), np.nan), receivers, np.full(4, SIGMA), np.full(2, 1 / C))
     assert none.status.tolist() == [positions.TOO_FEW] * 2 and not none.ok.any() and np.isnan(none.position).all()
+
+
+def test_emissions_positioned_a_block_at_a_time_are_each_positioned_alone(monkeypatch):
+    """A season's emissions are positioned a block at a time (:data:`~positions.EMISSIONS_BLOCK`): every fix is its
+    emission's own, so blocks of 7 give what one call over all 60 gives and what each emission positioned alone
+    gives (late arrivals, receivers that miss some emissions and one that hears none among them)."""
+    rng = np.random.default_rng(5)
+    receivers = _ring(rng, n=9)
+    E = 60
+    tags = rng.uniform(-150, 150, (E, 2))
+    late = np.where(rng.random((E, 9)) < 0.1, rng.uniform(2, 30, (E, 9)) / C, 0.0)
+    a, _ = _arrivals(rng, receivers, tags, late)
+    a[rng.random((E, 9)) < 0.2] = np.nan
+    a[:, 4] = np.nan
+    args = (receivers, np.full(9, SIGMA), np.full(E, 1 / C))
+    whole = position_emissions(a, *args)
+    monkeypatch.setattr(positions, "EMISSIONS_BLOCK", 7)
+    blocks = position_emissions(a, *args)
+    alone = [position_emissions(a[e:e + 1], receivers, np.full(9, SIGMA), np.full(1, 1 / C)) for e in range(E)]
+    assert whole.ok.sum() > 40
+    for name in ("position", "covariance", "emission_time", "used", "ok", "redundancy", "chi2", "status", "rejected"):
+        for got in (getattr(blocks, name), np.concatenate([getattr(f, name) for f in alone])):
+            want = getattr(whole, name)
+            if want.dtype.kind == "f":
+                np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12, equal_nan=True, err_msg=name)
+            else:
+                np.testing.assert_array_equal(got, want, err_msg=name)
