@@ -292,7 +292,8 @@ def _not_separable(a, heard, mask, receivers, sigma, slowness, p, T, info, facto
 
 def position_emissions(arrival: np.ndarray, receivers: np.ndarray, sigma: np.ndarray, slowness: np.ndarray
                        ) -> Fixes:
-    """Position each emission robustly, with its redundancy and the overall test (the module docstring).
+    """Position each emission robustly, with its redundancy and the overall test (the module docstring);
+    :data:`EMISSIONS_BLOCK` emissions at a time (each one's fix its own, so a season's arrays are a block's).
 
     Parameters
     ----------

@@ -117,6 +117,7 @@ def fathom_detections(piece: bytes, max_cells: int = MAX_DETECTION_CELLS) -> tup
     for k in np.flatnonzero(length >= MAX_LINE_CELLS):
         if piece.count(b",", starts[k], ends[k]) + 1 > MAX_LINE_CELLS:
             return None
+
     def at(k: int) -> np.ndarray:  # each line's k-th byte (a line shorter: its line end's, or the piece's last)
         return data[np.minimum(starts + k, len(data) - 1)]
 
