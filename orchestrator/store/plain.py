@@ -64,7 +64,7 @@ def plain_body(piece: bytes, width: int, first_line: int, max_cells: int = MAX_D
         table = pcsv.read_csv(
             io.BytesIO(piece),
             read_options=pcsv.ReadOptions(column_names=names, block_size=1 << 22),
-            parse_options=pcsv.ParseOptions(newlines_in_values=False),
+            parse_options=pcsv.ParseOptions(newlines_in_values=False, ignore_empty_lines=True),  # rows < lines
             convert_options=pcsv.ConvertOptions(column_types={n: pa.string() for n in names},
                                                 strings_can_be_null=False, quoted_strings_can_be_null=False))
     except pa.ArrowException:  # a row of another width, a byte not UTF-8: the text reader's

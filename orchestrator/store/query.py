@@ -187,7 +187,7 @@ class Store:
                 self._dataset = ds.dataset([str(f) for f in self.files], schema=schema, format="parquet")
             kept = None if columns is None else {*columns, *_COLUMNS, "clock_part"}
             read = None if kept is None else [c for c in self._dataset.schema.names
-                                              if c in kept or c in ("clock_part", "receiver_note")]
+                                              if c in kept or c == "receiver_note"]
             table = self._dataset.to_table(columns=read, filter=self._filter(tags, receivers, start, end))
         except Exception as exc:  # pyarrow's errors of a damaged file
             raise ModelError(f"store: {str(self.folder)!r}: its detections cannot be read "
