@@ -307,10 +307,11 @@ BOATS = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 #: signal lands at (seconds into the work), and whether it runs worker processes (then Ctrl-C also as a terminal
 #: sends it, to the whole process group). Each runs far longer uninterrupted.
 LONG = {
-    "run": (["run", "semicircle", "--set", "simulation.duration=20000"], "lock", (0.3, 2.0), False),
+    "run": (["run", "semicircle", "--set", "simulation.duration=30000"], "lock", (0.3, 2.0), False),  # 6 s here
     "run fmu": (["run", "semicircle", "--engine", "fmu", "--set", "simulation.duration=20000"], "lock", (1.0, 3.0),
                 False),
-    "compare": (["compare", "semicircle", "--replicates", "200"], "lock", (0.5, 3.0), False),
+    "compare": (["compare", "semicircle", "--replicates", "2000"], "lock", (0.5, 3.0), False),  # 20 s here (200
+                                              # replicates, 3 s, ended before its last point on a faster machine)
     "budget": (["budget", "lbl-field"], "lock", (1.0, 8.0), False),
     "map": (["map", "usbl-deep", "--extent", "2000", "--step", "10"], "lock", (0.2, 6.0), False),
     "design": (["design", "lbl-field-2km"], "lock", (1.0, 6.0), False),
