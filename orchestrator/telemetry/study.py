@@ -362,8 +362,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))
-                if light:  # written: its rows let go (a season's matrices are never in memory together)
-                    matrix = replace(matrix, toa=matrix.toa[:0], pings=matrix.pings.iloc[:0])
+                if light:  # written: its rows let go (a season's matrices are never in memory together; copies, as a
+                    # slice, a view, would hold the whole)
+                    matrix = replace(matrix, toa=matrix.toa[:0].copy(), pings=matrix.pings.iloc[:0].copy())
                 built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
                                              options), said)
                 row["folder"] = folder

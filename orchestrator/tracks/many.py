@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 from sblsim.models.declarations import ModelError
 from sblsim.models.errors import ConfigError
 from sblsim.orchestrator.io.arguments import path_argument, prepare_out, real_argument
+from sblsim.orchestrator.io.memory import release
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.tracks.options import TOA_OPTIONS, toa_options
 from sblsim.orchestrator.tracks.outcome import TrackOutcome
@@ -161,6 +162,7 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
             resume.save(keys[name][0], result, keys[name][1])
         kept = None if ended is None else ended(name, result)
         results[name] = result if kept is None else kept
+        release()  # what the tag's result took, unpickled and written, handed back (a season's tags one by one)
 
     if resume is not None:
         left = []
