@@ -362,9 +362,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))
-                if light:  # written: its rows let go (a season's matrices are never in memory together; copies, as a
-                    # slice, a view, would hold the whole)
-                    matrix = replace(matrix, toa=matrix.toa[:0].copy(), pings=matrix.pings.iloc[:0].copy())
+                if light:  # written: its rows let go (a season's matrices are never in memory together), its empty
+                    # tables made anew (a slice of them, a view, would hold them whole)
+                    matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=pd.DataFrame(
+                        columns=matrix.pings.columns).astype(matrix.pings.dtypes.to_dict()))
                 built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
                                              options), said)
                 row["folder"] = folder
