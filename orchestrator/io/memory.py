@@ -5,9 +5,9 @@ allocation: over a season's synchronisation the sync tags' rows' strings, their 
 and kept, and the resident memory grew with the season's length (`docs/benchmarks.md`, "A season's
 synchronisation"). The C library's allocator (glibc's ``malloc``) does the same with the arrays NumPy and pandas
 free: a freed array of more than its threshold for mapping memory raises that threshold (up to 32 MiB), the next
-ones of that size come from its heap, and freed heap pages stay resident: over a season's tracking each tag's
-results, unpickled, written and let go in the study's process, left the process 0.2-0.3 GiB larger than it needs
-(`docs/benchmarks.md`, "What a season's study keeps").
+ones of that size come from its heap, and freed heap pages stay resident: over a season's tracking the study's
+process grew as each tag's result came back, was written and let go (`docs/benchmarks.md`, "What a season's study
+keeps").
 """
 
 from __future__ import annotations
