@@ -8,13 +8,23 @@ free: a freed array of more than its threshold for mapping memory raises that th
 ones of that size come from its heap, and freed heap pages stay resident: over a season's tracking the study's
 process grew as each tag's result came back, was written and let go (`docs/benchmarks.md`, "What a season's study
 keeps").
+
+What a stage does not need need not be held through it: a table whose rows are let go for good is made anew empty
+(:func:`emptied`: a slice of it, or a copy of one, would hold its buffers), and one needed again after the stage is
+kept on disk through it (:func:`spilled`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
+import shutil
 import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
 
 
 @functools.cache
@@ -42,4 +52,48 @@ def release() -> None:
         trim(0)
 
 
-__all__ = ["release"]
+def emptied(frame: Any) -> Any:
+    """A pandas DataFrame of no rows with ``frame``'s columns and dtypes, made anew: it holds none of ``frame``'s
+    buffers (``frame.iloc[:0]`` is a view of them, and a copy of it still holds its Arrow text buffers)."""
+    import pandas as pd
+
+    return pd.DataFrame(columns=frame.columns).astype(frame.dtypes.to_dict())
+
+
+@contextlib.contextmanager
+def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
+    """``holder``'s table ``name`` (a pandas DataFrame attribute) kept on disk while the block runs, as Parquet in a
+    folder of its own made in ``folder`` (the attribute None meanwhile), then read back and the folder removed,
+    whether the block ends or raises. Read back its values are the same, its text columns Arrow's strings (as a
+    table kept for a resumed run is read). Where it cannot be written (a full disk) it stays in memory.
+
+    Raises
+    ------
+    OSError
+        The table cannot be read back (its folder removed under the run).
+    """
+    import pandas as pd
+
+    table = getattr(holder, name, None)
+    if table is None or not len(table):
+        yield
+        return
+    where = Path(tempfile.mkdtemp(prefix=".held-", dir=folder))
+    try:
+        try:
+            table.to_parquet(where / f"{name}.parquet")
+        except OSError:  # (a full disk: kept in memory, as without this)
+            yield
+            return
+        setattr(holder, name, None)
+        del table
+        release()
+        try:
+            yield
+        finally:
+            setattr(holder, name, pd.read_parquet(where / f"{name}.parquet"))
+    finally:
+        shutil.rmtree(where, ignore_errors=True)
+
+
+__all__ = ["emptied", "release", "spilled"]

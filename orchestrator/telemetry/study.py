@@ -33,6 +33,7 @@ latitude, longitude and UTC.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time as clock
 from dataclasses import dataclass, field, replace
@@ -44,6 +45,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
+from sblsim.orchestrator.io.memory import emptied, spilled
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.deployments import Deployments
@@ -364,8 +366,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                                                 np.isfinite(matrix.toa).any(axis=0))
                 if light:  # written: its rows let go (a season's matrices are never in memory together), its empty
                     # tables made anew (a slice of them, a view, would hold them whole)
-                    matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=pd.DataFrame(
-                        columns=matrix.pings.columns).astype(matrix.pings.dtypes.to_dict()))
+                    matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=emptied(matrix.pings))
                 built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
                                              options), said)
                 row["folder"] = folder
@@ -374,6 +375,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
                                                                                  code)
             rows[name] = row
+        stored_rows = None  # (the last tag's rows)
+        if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
+            assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
         for i in sorted(built):  # in the order asked, whatever the order read
             folder, matrix, job, said = built.pop(i)
             notes.extend(said)
@@ -408,7 +412,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
 
         kept = 0 if resume is None else resume.kept
-        results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
+        # the synchronisation's row per sync-tag arrival kept on disk while the tags are tracked (read back for the
+        # reference tags' scores and the study's sync/ folder)
+        with spilled(synced, "residuals", workdir) if light and synced is not None else contextlib.nullcontext():
+            results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
         if resume is not None and (resume.kept > kept or resume.taken):
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
             resume.taken.clear()

@@ -47,3 +47,75 @@ def test_release_off_glibc_is_arrows_alone(monkeypatch):
         memory.release()
     finally:
         memory._trim.cache_clear()
+
+
+def _table(n: int = 50_000):
+    """A table of a season's kinds of columns: Arrow text, floats, integers, booleans."""
+    import pandas as pd
+
+    rng = np.random.default_rng(3)
+    names = np.array([f"A69-1602-{k}" for k in range(40)], dtype=object)
+    return pd.DataFrame({"tag": pd.array(names[rng.integers(0, 40, n)], dtype="str"),
+                         "receiver": names[rng.integers(0, 40, n)], "time": rng.uniform(0, 8e6, n),
+                         "line": np.arange(n, dtype=np.int64), "kept": rng.random(n) < 0.9})
+
+
+def test_emptied_keeps_columns_and_dtypes_and_none_of_the_rows():
+    """The table made anew has no rows, the same columns and dtypes, and none of the original's buffers: the Arrow
+    pool's bytes the original's text held go when the original goes (a slice, or a copy of it, keeps them)."""
+    import pyarrow as pa
+
+    table = _table()
+    empty = memory.emptied(table)
+    assert len(empty) == 0 and list(empty.columns) == list(table.columns)
+    assert empty.dtypes.to_dict() == table.dtypes.to_dict()
+    for column in ("time", "line", "kept"):
+        assert not np.shares_memory(empty[column].to_numpy(), table[column].to_numpy())
+    held = pa.total_allocated_bytes()
+    sliced = table.iloc[:0].copy()  # the way that held them: the text column's buffers shared
+    del table
+    assert pa.total_allocated_bytes() == held  # the slice's copy holds the text whole
+    del sliced
+    assert pa.total_allocated_bytes() < held  # then they go: the empty table held none of them
+
+
+class _Holder:
+    residuals = None
+
+
+def test_spilled_table_is_off_memory_in_the_block_and_back_after(tmp_path):
+    """Inside the block the attribute is None and the table is a file in a folder of its own; after it, the same
+    values (its text as Arrow strings) and no file left, whether the block ends or raises."""
+    import pandas as pd
+
+    holder = _Holder()
+    holder.residuals = original = _table()
+    with memory.spilled(holder, "residuals", tmp_path):
+        assert holder.residuals is None
+        assert [p.suffix for p in tmp_path.rglob("*") if p.is_file()] == [".parquet"]
+    pd.testing.assert_frame_equal(holder.residuals, original, check_dtype=False)
+    assert (holder.residuals["receiver"] == original["receiver"]).all()
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(KeyboardInterrupt), memory.spilled(holder, "residuals", tmp_path):
+        raise KeyboardInterrupt
+    pd.testing.assert_frame_equal(holder.residuals, original, check_dtype=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spilled_table_stays_in_memory_where_the_disk_is_full(tmp_path, monkeypatch):
+    """A table that cannot be written (no space left) is held as without the spill: the block runs, nothing is left
+    on disk."""
+    import errno
+
+    import pandas as pd
+
+    def full(self, path, *args, **kwargs):
+        Path(path).write_bytes(b"PAR1")  # a part written before the disk filled
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    holder = _Holder()
+    holder.residuals = original = _table(100)
+    monkeypatch.setattr(pd.DataFrame, "to_parquet", full)
+    with memory.spilled(holder, "residuals", tmp_path):
+        assert holder.residuals is original
+    assert holder.residuals is original and list(tmp_path.iterdir()) == []
