@@ -78,22 +78,26 @@ def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
     if table is None or not len(table):
         yield
         return
-    where = Path(tempfile.mkdtemp(prefix=".held-", dir=folder))
+    where = None
     try:
-        try:
-            table.to_parquet(where / f"{name}.parquet")
-        except OSError:  # (a full disk: kept in memory, as without this)
-            yield
-            return
-        setattr(holder, name, None)
-        del table
-        release()
-        try:
-            yield
-        finally:
-            setattr(holder, name, pd.read_parquet(where / f"{name}.parquet"))
+        where = Path(tempfile.mkdtemp(prefix=".held-", dir=folder))
+        table.to_parquet(where / f"{name}.parquet")
+    except OSError:  # (a full disk: kept in memory, as without this)
+        if where is not None:
+            shutil.rmtree(where, ignore_errors=True)
+        where = None
+    if where is None:
+        yield
+        return
+    setattr(holder, name, None)
+    del table
+    release()
+    try:
+        yield
     finally:
-        shutil.rmtree(where, ignore_errors=True)
-
+        try:
+            setattr(holder, name, pd.read_parquet(where / f"{name}.parquet"))
+        finally:
+            shutil.rmtree(where, ignore_errors=True)
 
 __all__ = ["emptied", "release", "spilled"]

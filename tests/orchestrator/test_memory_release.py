@@ -119,3 +119,14 @@ def test_spilled_table_stays_in_memory_where_the_disk_is_full(tmp_path, monkeypa
     with memory.spilled(holder, "residuals", tmp_path):
         assert holder.residuals is original
     assert holder.residuals is original and list(tmp_path.iterdir()) == []
+
+
+def test_spilled_table_stays_in_memory_where_no_folder_can_be_made(tmp_path):
+    """The folder to spill into cannot be made (here: its parent is a file): the table is held, the block runs."""
+    holder = _Holder()
+    holder.residuals = original = _table(100)
+    parent = tmp_path / "a-file"
+    parent.write_text("")
+    with memory.spilled(holder, "residuals", parent):
+        assert holder.residuals is original
+    assert holder.residuals is original and [p.name for p in tmp_path.iterdir()] == ["a-file"]
