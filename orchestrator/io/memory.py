@@ -100,4 +100,5 @@ def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
         finally:
             shutil.rmtree(where, ignore_errors=True)
 
+
 __all__ = ["emptied", "release", "spilled"]
