@@ -189,7 +189,10 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
             futures = {client.submit(track_sent, sent_files(toa, receivers, options), options, pure=False): name
                        for name, toa, receivers, options in jobs}
             for future in as_completed(futures, loop=client.loop):
-                done(futures[future], future.result())
+                name, result = futures.pop(future), future.result()
+                future = None  # released: its result not held by the cluster while the others are tracked
+                done(name, result)
+                result = None
         finally:
             close_client(client)
     elif workers == 1 or len(jobs) == 1:
@@ -205,9 +208,13 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
         try:
             pending = {pool.submit(track_tag, toa, receivers, options): name for name, toa, receivers, options in jobs}
             while pending:
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    done(pending.pop(future), future.result())
+                finished = wait(pending, return_when=FIRST_COMPLETED)[0]
+                while finished:  # each ended tag's result held by no future while the next are awaited
+                    future = finished.pop()
+                    name, result = pending.pop(future), future.result()
+                    future = None
+                    done(name, result)
+                    result = None
             all_done = True
         finally:
             if not all_done:  # stopped (while submitting too) or failed: the tags under way stopped, not awaited

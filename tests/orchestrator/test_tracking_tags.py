@@ -119,3 +119,55 @@ def test_two_worker_processes_call_back_as_each_tag_ends(tmp_path):
     assert sorted(called) == ["tag0", "tag1"] and set(many) == {"tag0", "tag1"}
     for name in many:
         pd.testing.assert_frame_equal(many[name].track, one[name].track)
+
+
+@pytest.mark.slow
+def test_an_ended_tags_outcome_is_not_held_while_the_next_are_awaited(tmp_path, monkeypatch):
+    """run_tracks in two worker processes: each tag's outcome, once its callback has ended, is held by nothing (no
+    future keeps it) while the tags still under way are awaited (a season's outcomes are tens of MiB each)."""
+    import gc
+    import weakref
+
+    from sblsim.orchestrator.tracks import many
+
+    folder, receivers = _array(tmp_path, tags=3)
+    options = {"sound_speed": 1480.0, "other_filters": False}
+    jobs = [(f"tag{k}", folder / f"tag{k}.txt", receivers, options) for k in range(3)]
+    ended, alive_at_wait = [], []
+    real_wait = many.wait
+
+    def watched(*args, **kwargs):
+        gc.collect()
+        alive_at_wait.append(sum(r() is not None for r in ended))
+        return real_wait(*args, **kwargs)
+
+    monkeypatch.setattr(many, "wait", watched)
+    results = many.run_tracks(jobs, workers=2, ended=lambda name, result: ended.append(weakref.ref(result)) or name)
+    assert len(ended) == 3 and set(results.values()) == {"tag0", "tag1", "tag2"}  # what the callback returned kept
+    assert len(alive_at_wait) >= 2 and max(alive_at_wait) == 0, alive_at_wait
+
+
+@pytest.mark.slow
+def test_a_dask_cluster_holds_no_ended_tags_result(tmp_path, monkeypatch):
+    """run_tracks on a local Dask cluster: when a tag's callback runs, the client holds only the futures of the tags
+    not yet ended (an ended tag's result is let go on its worker, not kept there to the study's end)."""
+    import gc
+
+    from sblsim.orchestrator.campaign import executors
+    from sblsim.orchestrator.tracks import many
+
+    folder, receivers = _array(tmp_path, tags=3)
+    options = {"sound_speed": 1480.0, "other_filters": False}
+    jobs = [(f"tag{k}", folder / f"tag{k}.txt", receivers, options) for k in range(3)]
+    clients, held = [], []
+    real_connect = executors.connect
+    monkeypatch.setattr(executors, "connect", lambda *a, **k: clients.append(real_connect(*a, **k)) or clients[-1])
+
+    def ended(name, result):
+        gc.collect()
+        held.append(len(clients[0].futures))  # the futures this client still holds (their results on the workers)
+        return None
+
+    results = many.run_tracks(jobs, workers=2, scheduler="local", ended=ended)
+    assert set(results) == {"tag0", "tag1", "tag2"}
+    assert held[-1] == 0 and held == sorted(held, reverse=True), held
