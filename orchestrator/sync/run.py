@@ -273,8 +273,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     if never:
         notes.append(f"sync tags never heard: {', '.join(never)}")
 
-    # a receiver whose time went back in the file's order: each later part of its rows a clock of its own, its
-    # arrivals aligned to the others' for the grouping alone (the reader's clock_part; models.sync.breaks)
+    # a receiver's time gone back (the reader's clock_part): each later part a clock, aligned for the grouping alone
     part = sync["clock_part"].to_numpy(np.int64) if "clock_part" in sync else None
     if part is not None and (part > 1).any():
         search = max(abs(r["step_s"]) for r in detections.clock_resets) + RESET_GAP
@@ -287,7 +286,6 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     emission, duplicate, single = sync_emissions(tag, receiver, aligned, _gaps(tag, receiver, aligned,
                                                                                 len(tag_names)))
     used = ~duplicate & ~single
-
     xyz = hydrophones[["x", "y", "z"]].to_numpy(float)
     dim = 3 if np.isfinite(xyz[:, 2]).all() else 2
     positions = xyz[:, :dim]
@@ -295,6 +293,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     # said or refused before the work: the table's unit and the times' rounding
     notes_first = _checks(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver, tag,
                           emission, duplicate, positions, sound_speed, series, alternatives or {})
+    resets, line = _resets(detections, sync), sync["line"].to_numpy()
+    del sync  # (a copy of the season's sync-tag rows, not held through the fit)
 
     if sound_speed is not None:
         slowness, speed_source = np.full(len(time), 1.0 / sound_speed), "given"
@@ -370,7 +370,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         "emission": emission, "time": time + origin,
         "time_sync": time + origin - np.where(on, fit.offset(np.maximum(rows, 0), time), np.nan),
         "distance_m": distance, "residual_s": fit.residual, "residual_m": fit.residual / emission_slowness,
-        "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": sync["line"].to_numpy()})
+        "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": line})
 
     if fit.site is not None:
         residuals["segment"] = np.where(rows >= 0, segments.segment_numbers(fit)[np.maximum(rows, 0)], 0)
@@ -396,7 +396,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                                names, 1.0 / float(np.median(emission_slowness)), f"detections {detections.source!r}")
     if notes_first or rounded:  # said first: the table's unit, the rounding
         summary["warnings"] = notes_first + ([rounded] if rounded else []) + summary.get("warnings", [])
-    summary["clock_breaks"] = segments.breaks_summary(fit, names, origin, _resets(detections, sync))
+    summary["clock_breaks"] = segments.breaks_summary(fit, names, origin, resets)
     for entry in summary["clock_breaks"]:  # each named in one line (the command prints the warnings)
         summary.setdefault("warnings", []).append(segments.break_line(entry))
         # its entry's offsets and drifts are its first segment's; offsets.csv has every segment's
