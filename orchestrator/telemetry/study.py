@@ -37,6 +37,7 @@ import contextlib
 import os
 import time as clock
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -70,7 +71,7 @@ from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
 from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
-from sblsim.orchestrator.tracks.outputs import written_light
+from sblsim.orchestrator.tracks.outputs import written_main
 from sblsim.orchestrator.tracks.resume import Resume
 from sblsim.orchestrator.tracks.tracker import toa_noise
 
@@ -396,6 +397,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         specs = dict(asked)
         tick = clock.perf_counter()
         parts = TrackParts(workdir) if light and not keep_tracks else None
+        finish = {f: partial(written_main, out=workdir / f) for f, *_ in jobs  # a tag's files written as it ends
+                  if light and specs[by_folder[f]].role != "reference"}  # (in its worker, on this machine)
 
         def done(folder: str, result):
             name = by_folder[folder]
@@ -406,16 +409,15 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 ended(rows[name])
             if parts is not None and not isinstance(result, str) and rows[name]["status"] == "tracked":
                 parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
-            if light and not isinstance(result, str) and specs[name].role != "reference":
-                light_outcome = written_light(result, workdir / folder)  # its files now, its track alone kept
-                return light_outcome if parts is None else replace(light_outcome, track=None)
+            if folder in finish and not isinstance(result, str):  # its files written as it ended: its track kept
+                return replace(result, estimates=None) if parts is None else replace(result, estimates=None, track=None)
             return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
 
         kept = 0 if resume is None else resume.kept
         # the synchronisation's row per sync-tag arrival kept on disk while the tags are tracked (read back for the
         # reference tags' scores and the study's sync/ folder)
         with spilled(synced, "residuals", workdir) if light and synced is not None else contextlib.nullcontext():
-            results = run_tracks(jobs, workers, scheduler, done, resume) if jobs else {}
+            results = run_tracks(jobs, workers, scheduler, done, resume, finish) if jobs else {}
         if resume is not None and (resume.kept > kept or resume.taken):
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
             resume.taken.clear()

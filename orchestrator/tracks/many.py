@@ -30,7 +30,7 @@ from sblsim.orchestrator.tracks.options import TOA_OPTIONS, toa_options
 from sblsim.orchestrator.tracks.outcome import TrackOutcome
 from sblsim.orchestrator.tracks.outputs import write
 from sblsim.orchestrator.tracks.replay import TrackResult
-from sblsim.orchestrator.tracks.resume import Resume, job_key
+from sblsim.orchestrator.tracks.resume import Resume, job_key, write_entry
 from sblsim.orchestrator.tracks.track import track
 
 if TYPE_CHECKING:  # the heavy modules are imported when a function runs
@@ -90,6 +90,18 @@ def track_tag(toa_path: Path, receivers: Path, options: dict[str, Any]):
         return f"internal error ({type(exc).__name__}: {' '.join(str(exc).split())[:200]}); please report it"
 
 
+def track_finished(toa_path: Path, receivers: Path, options: dict[str, Any], entry: Path | None = None,
+                   finish: Callable[[Any], Any] | None = None) -> tuple[Any, tuple[str, str] | None]:
+    """:func:`track_tag` in a worker process that shares the caller's filesystem: its outcome kept for a rerun there
+    (``entry``: :meth:`~sblsim.orchestrator.tracks.resume.Resume.staging`'s folder), then given to ``finish``
+    there (e.g. its files written and what is sent back cut to what the caller keeps:
+    :func:`~sblsim.orchestrator.tracks.outputs.written_main`). Returns what ``finish`` made of the outcome, and
+    why the entry could not be kept (:func:`~sblsim.orchestrator.tracks.resume.filled`) or None."""
+    result = track_tag(toa_path, receivers, options)
+    unkept = None if entry is None else write_entry(entry, result, toa_path.parent)
+    return (result if finish is None else finish(result)), unkept
+
+
 def _row(name: str, result, elapsed: float) -> dict[str, Any]:
     if isinstance(result, str):
         return {"tag": name, "status": "refused", "reason": result, "wall_time_s": elapsed}
@@ -146,20 +158,28 @@ def track_sent(files: dict[str, tuple[str, bytes]], options: dict[str, Any]):
 
 def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: int | None = None,
                scheduler: str | None = None, ended: Callable[[str, Any], None] | None = None,
-               resume: Resume | None = None) -> dict[str, Any]:
+               resume: Resume | None = None, finish: dict[str, Callable[[Any], Any]] | None = None
+               ) -> dict[str, Any]:
     """Track each job ``(name, toa_path, receivers_path, options)`` (:func:`track_tag`, each with its own options) in
     worker processes (``workers``, default the CPU count; 1: one after another in this process) or on a Dask
     scheduler's workers (each sent its tag's files: :func:`track_sent`, no shared filesystem assumed); ``ended(name,
     result)`` called as each ends (what it returns, where not None, kept in the result's place: a study that wrote
     the tag's files keeps its track alone). With ``resume``, a tag kept by an interrupted run of the same inputs is
-    taken from it (:mod:`.resume`) and each tag that ends is kept. Returns name → the
-    :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, or the one line of its refusal."""
+    taken from it (:mod:`.resume`) and each tag that ends is kept. ``finish`` (name → a picklable function) is applied
+    to that tag's outcome (kept whole for a rerun first) before ``ended`` sees it: in its worker process where the
+    workers are this machine's (:func:`track_finished`: a season's tag not sent back whole), else here. Returns
+    name → the :class:`~sblsim.orchestrator.tracks.outcome.TrackOutcome`, or the one line of its refusal."""
     results: dict[str, Any] = {}
     keys: dict[str, tuple[str, Path]] = {}
+    finish = finish or {}
 
-    def done(name: str, result) -> None:
-        if resume is not None and name in keys:
+    def done(name: str, result, staged: Path | None = None, unkept=None, finished: bool = False) -> None:
+        if resume is not None and name in keys and staged is not None:  # kept by its worker
+            resume.adopt(keys[name][0], staged, unkept)
+        elif resume is not None and name in keys and not finished:
             resume.save(keys[name][0], result, keys[name][1])
+        if name in finish and not finished:
+            result = finish[name](result)
         kept = None if ended is None else ended(name, result)
         results[name] = result if kept is None else kept
         release()  # what the tag's result took, unpickled and written, handed back (a season's tags one by one)
@@ -206,14 +226,17 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
                                    initializer=watch_parent, initargs=(os.getpid(),))
         all_done = False  # (not `ended`: the callback's name, which done() calls)
         try:
-            pending = {pool.submit(track_tag, toa, receivers, options): name for name, toa, receivers, options in jobs}
+            pending = {}
+            for name, toa, receivers, options in jobs:  # each kept for a rerun and finished by its worker
+                staged = resume.staging(keys[name][0]) if resume is not None and name in keys else None
+                pending[pool.submit(track_finished, toa, receivers, options, staged, finish.get(name))] = name, staged
             while pending:
                 finished = wait(pending, return_when=FIRST_COMPLETED)[0]
                 while finished:  # each ended tag's result held by no future while the next are awaited
                     future = finished.pop()
-                    name, result = pending.pop(future), future.result()
+                    (name, staged), (result, unkept) = pending.pop(future), future.result()
                     future = None
-                    done(name, result)
+                    done(name, result, staged, unkept, finished=True)
                     result = None
             all_done = True
         finally:

@@ -31,6 +31,9 @@ def figure(outcome: TrackOutcome):
     """The track on a map over the receivers (the ok rows coloured by their 2-D σ, the flagged ones marked, the
     truth where there is one, a scale bar), and beside it the 2-D errors along the time with the track's 2σ band
     (with a truth) or the track's own σ along the time (without one): a matplotlib figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # (drawn to a file, in a worker process too: never a display's backend)
     import matplotlib.pyplot as plt
     from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
@@ -130,4 +133,17 @@ def written_light(outcome: TrackOutcome, out: Path) -> TrackOutcome:
     return replace(outcome, estimates=None, errors=None, bound=None, set_aside=None)
 
 
-__all__ = ["figure", "scale_bar", "write", "written_light"]
+def written_main(outcome: TrackOutcome | str, out: Path) -> TrackOutcome | str:
+    """``outcome``'s files written into ``out`` (:func:`write`), and what is sent back of it: :func:`written_light`'s,
+    its ``estimates`` the rows of its track's own estimator alone (``summary["track"]``: its ``tags.csv`` row's
+    counts). Run where the tag was tracked (a worker sharing the study's filesystem), so that a season's tag never
+    travels whole. A refusal's line is returned as it is."""
+    if isinstance(outcome, str):
+        return outcome
+    write(outcome, out)
+    rows = outcome.estimates
+    return replace(outcome, estimates=rows[rows["estimator"] == outcome.summary["track"]], errors=None, bound=None,
+                   set_aside=None)
+
+
+__all__ = ["figure", "scale_bar", "write", "written_light", "written_main"]

@@ -21,6 +21,7 @@ import hashlib
 import json
 import os
 import shutil
+import uuid
 import warnings
 from pathlib import Path
 from typing import Any, Callable
@@ -91,6 +92,23 @@ class Resume:
         except Exception:  # an entry damaged or not ours: made again
             return None
 
+    def _made(self) -> None:
+        if not self.folder.exists():
+            self.folder.mkdir()
+            (self.folder / MARKER).write_text("sblsim keeps finished tags here for a rerun; removed when the run "
+                                              "ends\n")
+
+    def _not_kept(self, staging: Path, failure: tuple[str, str]) -> None:
+        """``staging`` removed and its ``failure`` said: a disk's (``"disk"``: said once, the folder not used again by
+        this run) or an entry's (a table a file format cannot hold: made again on a rerun, nothing lost)."""
+        shutil.rmtree(staging, ignore_errors=True)
+        kind, said = failure
+        if kind == "disk":
+            self.usable = False
+            warnings.warn(f"finished tags are no longer kept for a rerun ({str(self.folder)!r}: {said})", stacklevel=3)
+        else:
+            warnings.warn(f"an outcome is not kept for a rerun ({said})", stacklevel=3)
+
     def store(self, key: str, write: Callable[[Path], None]) -> None:
         """Keep an entry under ``key``: ``write(folder)`` fills a folder of a temporary name, renamed ``key`` once
         whole; a disk that cannot hold it is said once and the folder is not used again by this run."""
@@ -98,23 +116,36 @@ class Resume:
             return
         staging = self.folder / f".{key}.{os.getpid()}"
         try:
-            if not self.folder.exists():
-                self.folder.mkdir()
-                (self.folder / MARKER).write_text("sblsim keeps finished tags here for a rerun; removed when the run "
-                                                  "ends\n")
+            self._made()
             shutil.rmtree(staging, ignore_errors=True)
             staging.mkdir()
-            write(staging)
-            os.replace(staging, self.folder / key)
         except OSError as exc:
-            shutil.rmtree(staging, ignore_errors=True)
-            self.usable = False
-            warnings.warn(f"finished tags are no longer kept for a rerun ({str(self.folder)!r}: {exc.strerror or exc})",
-                          stacklevel=2)
-        except Exception as exc:  # a table a file format cannot hold: this entry made again on a rerun, nothing lost
-            shutil.rmtree(staging, ignore_errors=True)
-            said = " ".join(str(exc).split())[:200]
-            warnings.warn(f"an outcome is not kept for a rerun ({type(exc).__name__}: {said})", stacklevel=2)
+            return self._not_kept(staging, ("disk", str(exc.strerror or exc)))
+        self.adopt(key, staging, filled(staging, write))
+
+    def staging(self, key: str) -> Path | None:
+        """Where another process writes the entry of ``key`` (:func:`write_entry`, a worker sharing this filesystem:
+        a folder of a temporary name, not yet made), then kept by :meth:`adopt`; None where entries are
+        not kept."""
+        if not self.usable:
+            return None
+        try:
+            self._made()
+        except OSError as exc:
+            self._not_kept(self.folder / f".{key}", ("disk", str(exc.strerror or exc)))
+            return None
+        return self.folder / f".{key}.{os.getpid()}.{uuid.uuid4().hex}"
+
+    def adopt(self, key: str, staging: Path, failure: tuple[str, str] | None) -> None:
+        """Keep the entry written into ``staging`` (:meth:`staging`) under ``key``, or say why it was not
+        (``failure``: :func:`filled`'s)."""
+        if failure is None:
+            try:
+                os.replace(staging, self.folder / key)
+                return
+            except OSError as exc:
+                failure = ("disk", str(exc.strerror or exc))
+        self._not_kept(staging, failure)
 
     def load(self, key: str, where: Path) -> TrackOutcome | str | None:
         """The tag's outcome kept under ``key`` (a refusal as its line, the token of its folder made ``where``), or
@@ -132,6 +163,25 @@ class Resume:
         """Remove the resume folder (the run's output is written)."""
         if self.usable and (self.folder / MARKER).is_file():
             shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def filled(staging: Path, write: Callable[[Path], None]) -> tuple[str, str] | None:
+    """``write(staging)`` into the folder ``staging`` (made here where it is not), or why it could not: ``("disk",
+    line)`` where the disk refused it, ``("entry", line)`` where the outcome cannot be kept (:meth:`Resume.adopt`)."""
+    try:
+        staging.mkdir(exist_ok=True)
+        write(staging)
+    except OSError as exc:
+        return "disk", str(exc.strerror or exc)
+    except Exception as exc:
+        return "entry", f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+    return None
+
+
+def write_entry(staging: Path, result: TrackOutcome | str, where: Path) -> tuple[str, str] | None:
+    """A tag's ``result`` kept in ``staging`` (:meth:`Resume.staging`) as :meth:`Resume.save` keeps it, in the
+    process that tracked it; returns :func:`filled`'s failure, or None."""
+    return filled(staging, lambda entry: _write(entry, result, where))
 
 
 def write_tables(entry: Path, holder: Any, names: tuple[str, ...]) -> None:
@@ -182,4 +232,5 @@ def _read(entry: Path, where: Path) -> TrackOutcome | str:
                         tables["set_aside"])
 
 
-__all__ = ["MARKER", "Resume", "TABLES", "job_key", "read_tables", "resume_folder", "write_tables"]
+__all__ = ["MARKER", "Resume", "TABLES", "filled", "job_key", "read_tables", "resume_folder", "write_entry",
+           "write_tables"]

@@ -10,6 +10,7 @@ import errno
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -218,3 +219,84 @@ def test_what_ended_returns_is_kept_and_a_written_outcome_keeps_its_track_alone(
     for name in ("track", "estimates"):  # as the whole outcome's are written
         assert (tmp_path / "tag0" / f"{name}.csv").read_text() == getattr(outcome, name).to_csv(index=False)
     assert json.loads((tmp_path / "tag0" / "summary.json").read_text()) == outcome.summary
+
+
+def test_an_entry_written_elsewhere_is_kept_whole_or_said_once(tracked, tmp_path):
+    """:meth:`Resume.staging`, :func:`~sblsim.orchestrator.tracks.resume.write_entry` (as a worker writes it) and
+    :meth:`Resume.adopt`: the entry read back as the outcome; an entry that could not be written is said and leaves
+    nothing, a disk's failure once (not tried again), an entry's alone (the others still kept)."""
+    folder, _, outcome = tracked
+    keep = Resume(tmp_path / "out")
+    staged = keep.staging("k")
+    assert not staged.exists() and staged.parent == resume_folder(tmp_path / "out")
+    keep.adopt("k", staged, resume.write_entry(staged, outcome, folder))
+    back = keep.load("k", folder)
+    pd.testing.assert_frame_equal(back.estimates, outcome.estimates)
+    pd.testing.assert_frame_equal(back.track, outcome.track)
+    with pytest.warns(UserWarning, match=r"not kept for a rerun \(ValueError: a table"):
+        keep.adopt("e", keep.staging("e"), ("entry", "ValueError: a table"))
+    assert keep.usable
+    staged = keep.staging("d")
+    staged.mkdir()
+    (staged / "track.parquet").write_bytes(b"PAR1")  # written in part, then the disk was full
+    with pytest.warns(UserWarning, match="no longer kept"):
+        keep.adopt("d", staged, ("disk", os.strerror(errno.ENOSPC)))
+    assert not keep.usable and keep.staging("d2") is None
+    assert sorted(p.name for p in resume_folder(tmp_path / "out").iterdir()) == sorted([MARKER, "k"])
+
+
+def test_written_main_writes_the_whole_outcomes_files_and_sends_back_its_tracks_rows(tracked, tmp_path):
+    """:func:`~sblsim.orchestrator.tracks.outputs.written_main`: the files of the whole outcome; what is sent back its
+    track estimator's rows alone (its ``tags.csv`` row the whole outcome's), no other table; a refusal as it is."""
+    from sblsim.orchestrator.telemetry.tag_rows import tracked_row
+    from sblsim.orchestrator.tracks.outputs import written_main
+
+    _, _, outcome = tracked
+    sent = written_main(outcome, tmp_path / "t")
+    for name in ("track", "estimates"):
+        assert (tmp_path / "t" / f"{name}.csv").read_text() == getattr(outcome, name).to_csv(index=False)
+    main = outcome.summary["track"]
+    assert set(sent.estimates["estimator"]) == {main} and outcome.estimates["estimator"].nunique() > 1
+    assert len(sent.estimates) == int((outcome.estimates["estimator"] == main).sum())
+    assert sent.errors is None and sent.bound is None and sent.set_aside is None and sent.track is outcome.track
+    row = {"pings": 60, "pings_at_once": 60}
+    assert tracked_row(sent, 1.0, row) == tracked_row(outcome, 1.0, row)
+    assert written_main("refused: a line", tmp_path / "r") == "refused: a line" and not (tmp_path / "r").exists()
+
+
+@pytest.mark.slow
+def test_worker_processes_keep_and_finish_each_tag_as_one_process_does(tracked, tmp_path):
+    """run_tracks in two worker processes with ``finish`` and a resume folder: each tag kept whole for a rerun by its
+    worker (no folder of a temporary name left), finished there (what ``ended`` sees, its files), the files those of
+    one process's; run again, every tag taken from the folder and finished here, to the same files."""
+    from functools import partial
+
+    from sblsim.orchestrator.tracks.outputs import written_main
+
+    (tmp_path / "in").mkdir()
+    folder, receivers = _array(tmp_path / "in", tags=3)
+    jobs = [(f"tag{k}", folder / f"tag{k}.txt", receivers, OPTIONS) for k in range(3)]
+
+    def run(out: Path, workers: int) -> dict:
+        seen: dict = {}
+        finish = {name: partial(written_main, out=out / name) for name, *_ in jobs}
+        many.run_tracks(jobs, workers=workers, resume=Resume(out), finish=finish,
+                        ended=lambda name, result: seen.setdefault(name, result) and None)
+        return seen
+
+    one = run(tmp_path / "one", 1)
+    seen = run(tmp_path / "many", 2)
+    kept = resume_folder(tmp_path / "many")
+    assert sorted(p.name for p in kept.iterdir()) == sorted([MARKER] + [job_key(*j[1:]) for j in jobs])
+    shutil.rmtree(tmp_path / "many" / "tag0")
+    again = Resume(tmp_path / "many")
+    seen_again = {}
+    many.run_tracks(jobs, workers=2, resume=again, ended=lambda name, result: seen_again.setdefault(name, result),
+                    finish={name: partial(written_main, out=tmp_path / "many" / name) for name, *_ in jobs})
+    assert again.kept == 3
+    for name, *_ in jobs:
+        for sent in (seen[name], seen_again[name]):
+            pd.testing.assert_frame_equal(sent.estimates, one[name].estimates)
+            assert set(sent.estimates["estimator"]) == {sent.summary["track"]}
+        for file in ("track.csv", "estimates.csv"):
+            assert (tmp_path / "many" / name / file).read_bytes() == (tmp_path / "one" / name / file).read_bytes()
