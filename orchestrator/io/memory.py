@@ -95,10 +95,12 @@ def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
     try:
         yield
     finally:
-        try:
-            setattr(holder, name, pd.read_parquet(where / f"{name}.parquet"))
+        try:  # each column's Arrow buffers let go as it is converted, and what the reading freed handed back
+            setattr(holder, name, pd.read_parquet(where / f"{name}.parquet",
+                                                  to_pandas_kwargs={"self_destruct": True, "split_blocks": True}))
         finally:
             shutil.rmtree(where, ignore_errors=True)
+        release()
 
 
 __all__ = ["emptied", "release", "spilled"]
