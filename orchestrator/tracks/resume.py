@@ -138,7 +138,10 @@ class Resume:
 
     def adopt(self, key: str, staging: Path, failure: tuple[str, str] | None) -> None:
         """Keep the entry written into ``staging`` (:meth:`staging`) under ``key``, or say why it was not
-        (``failure``: :func:`filled`'s)."""
+        (``failure``: :func:`filled`'s); after a disk's failure, removed unsaid (the folder not used again)."""
+        if not self.usable:
+            shutil.rmtree(staging, ignore_errors=True)
+            return
         if failure is None:
             try:
                 os.replace(staging, self.folder / key)

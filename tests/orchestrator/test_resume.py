@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pandas as pd
@@ -242,6 +243,12 @@ def test_an_entry_written_elsewhere_is_kept_whole_or_said_once(tracked, tmp_path
     with pytest.warns(UserWarning, match="no longer kept"):
         keep.adopt("d", staged, ("disk", os.strerror(errno.ENOSPC)))
     assert not keep.usable and keep.staging("d2") is None
+    late = resume_folder(tmp_path / "out") / ".late"  # a worker's entry ending after the disk's failure: not kept,
+    late.mkdir()  # not said again
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        keep.adopt("late", late, None)
+    assert not late.exists()
     assert sorted(p.name for p in resume_folder(tmp_path / "out").iterdir()) == sorted([MARKER, "k"])
 
 
