@@ -173,10 +173,8 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
     keys: dict[str, tuple[str, Path]] = {}
     finish = finish or {}
 
-    def done(name: str, result, staged: Path | None = None, unkept=None, finished: bool = False) -> None:
-        if resume is not None and name in keys and staged is not None:  # kept by its worker
-            resume.adopt(keys[name][0], staged, unkept)
-        elif resume is not None and name in keys and not finished:
+    def done(name: str, result, finished: bool = False) -> None:  # (finished: kept and finished by its worker)
+        if resume is not None and name in keys and not finished:
             resume.save(keys[name][0], result, keys[name][1])
         if name in finish and not finished:
             result = finish[name](result)
@@ -236,7 +234,9 @@ def run_tracks(jobs: Sequence[tuple[str, Path, Path, dict[str, Any]]], workers: 
                     future = finished.pop()
                     (name, staged), (result, unkept) = pending.pop(future), future.result()
                     future = None
-                    done(name, result, staged, unkept, finished=True)
+                    if staged is not None:
+                        resume.adopt(keys[name][0], staged, unkept)
+                    done(name, result, finished=True)
                     result = None
             all_done = True
         finally:

@@ -140,10 +140,8 @@ def written_main(outcome: TrackOutcome | str, out: Path) -> TrackOutcome | str:
     travels whole. A refusal's line is returned as it is."""
     if isinstance(outcome, str):
         return outcome
-    write(outcome, out)
     rows = outcome.estimates
-    return replace(outcome, estimates=rows[rows["estimator"] == outcome.summary["track"]], errors=None, bound=None,
-                   set_aside=None)
+    return replace(written_light(outcome, out), estimates=rows[rows["estimator"] == outcome.summary["track"]])
 
 
 __all__ = ["figure", "scale_bar", "write", "written_light", "written_main"]

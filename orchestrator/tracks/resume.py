@@ -98,10 +98,11 @@ class Resume:
             (self.folder / MARKER).write_text("sblsim keeps finished tags here for a rerun; removed when the run "
                                               "ends\n")
 
-    def _not_kept(self, staging: Path, failure: tuple[str, str]) -> None:
+    def _not_kept(self, staging: Path | None, failure: tuple[str, str]) -> None:
         """``staging`` removed and its ``failure`` said: a disk's (``"disk"``: said once, the folder not used again by
         this run) or an entry's (a table a file format cannot hold: made again on a rerun, nothing lost)."""
-        shutil.rmtree(staging, ignore_errors=True)
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
         kind, said = failure
         if kind == "disk":
             self.usable = False
@@ -110,29 +111,23 @@ class Resume:
             warnings.warn(f"an outcome is not kept for a rerun ({said})", stacklevel=3)
 
     def store(self, key: str, write: Callable[[Path], None]) -> None:
-        """Keep an entry under ``key``: ``write(folder)`` fills a folder of a temporary name, renamed ``key`` once
-        whole; a disk that cannot hold it is said once and the folder is not used again by this run."""
-        if not self.usable:
-            return
-        staging = self.folder / f".{key}.{os.getpid()}"
-        try:
-            self._made()
-            shutil.rmtree(staging, ignore_errors=True)
-            staging.mkdir()
-        except OSError as exc:
-            return self._not_kept(staging, ("disk", str(exc.strerror or exc)))
-        self.adopt(key, staging, filled(staging, write))
+        """Keep an entry under ``key``: ``write(folder)`` fills a folder of a temporary name (:meth:`staging`),
+        renamed ``key`` once whole (:meth:`adopt`); a disk that cannot hold it is said once and the folder is not used
+        again by this run."""
+        staging = self.staging(key)
+        if staging is not None:
+            self.adopt(key, staging, filled(staging, write))
 
     def staging(self, key: str) -> Path | None:
-        """Where another process writes the entry of ``key`` (:func:`write_entry`, a worker sharing this filesystem:
-        a folder of a temporary name, not yet made), then kept by :meth:`adopt`; None where entries are
-        not kept."""
+        """Where the entry of ``key`` is written (:func:`filled`; by another process sharing this filesystem,
+        :func:`write_entry`): a folder of a temporary name, not yet made, then kept by :meth:`adopt`; None where
+        entries are not kept."""
         if not self.usable:
             return None
         try:
             self._made()
         except OSError as exc:
-            self._not_kept(self.folder / f".{key}", ("disk", str(exc.strerror or exc)))
+            self._not_kept(None, ("disk", str(exc.strerror or exc)))
             return None
         return self.folder / f".{key}.{os.getpid()}.{uuid.uuid4().hex}"
 
