@@ -63,7 +63,7 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
             "sync_tags_heard": sorted({tag_names[i] for i in np.unique(tag[fitted])}),
         }
         if linked[j]:
-            r = residuals.loc[residuals["kept"].to_numpy() & mine]
+            r = residuals.loc[residuals["kept"].to_numpy() & mine, ["residual_m", "residual_s"]]
             entry.update({
                 "noise_scale_s": float(fit.scale[j]),
                 "median_abs_residual_m": float(np.median(np.abs(r["residual_m"]))) if len(r) else None,

@@ -52,9 +52,10 @@ def figures(outcome: SyncOutcome) -> dict:
     ax.legend(fontsize=6, ncol=4, loc="upper left", bbox_to_anchor=(1.01, 1.0) if len(groups) > 24 else None)
     fig1.tight_layout()
     fig2, bx = plt.subplots(figsize=(10, 5))
-    kept = r[r["kept"]]
-    names = [n for n in rec["receiver"] if (kept["receiver"] == n).any()]
-    bx.boxplot([kept.loc[kept["receiver"] == n, "residual_m"].to_numpy() for n in names], showfliers=False)
+    kept = r.loc[r["kept"].to_numpy(bool), ["receiver", "tag", "residual_m"]]  # the columns drawn, not a copy of all
+    drawn = {str(n): g.to_numpy() for n, g in kept.groupby("receiver")["residual_m"]}
+    names = [n for n in rec["receiver"] if n in drawn]
+    bx.boxplot([drawn[n] for n in names], showfliers=False)
     bx.set_xticks(range(1, len(names) + 1), names, rotation=90, fontsize=7)
     bx.axhline(0, color="k", lw=0.5)
     bx.set(ylabel="residual [m]", title="sync residuals per receiver (kept arrivals; whiskers 1.5 IQR)")

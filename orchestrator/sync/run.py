@@ -363,17 +363,6 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     bridged = (fit.counts < MIN_BIN_ARRIVALS) & synced[:, None]
     bridged[start] = False
 
-    reason = _reasons(np.select([duplicate, single, rows < 0, ~on, ~fit.kept], [1, 2, 3, 4, 5], 0))
-    emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
-    residuals = pd.DataFrame({
-        "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
-        "emission": emission, "time": time + origin,
-        "time_sync": time + origin - np.where(on, fit.offset(np.maximum(rows, 0), time), np.nan),
-        "distance_m": distance, "residual_s": fit.residual, "residual_m": fit.residual / emission_slowness,
-        "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": line})
-
-    if fit.site is not None:
-        residuals["segment"] = np.where(rows >= 0, segments.segment_numbers(fit)[np.maximum(rows, 0)], 0)
     offsets = _offsets(fit, names, synced, bridged, origin)
     # each receiver's timing noise (its residuals' robust scale and its clock's sigma), for the tracker
     noise = receiver_noise(receiver, fit.standardised * fit.scale[np.maximum(rows, 0)],
@@ -389,6 +378,17 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                            fits, table_sigma, windows)
     refined = _positions(fit, positions, names, linked, identified, tag_names) if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
+    reason = _reasons(np.select([duplicate, single, rows < 0, ~on, ~fit.kept], [1, 2, 3, 4, 5], 0))
+    emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
+    # every arrival's row made once the sync tags are scored (not held through their refits), on the fit's arrays
+    residuals = pd.DataFrame({
+        "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
+        "emission": emission, "time": time + origin,
+        "time_sync": time + origin - np.where(on, fit.offset(np.maximum(rows, 0), time), np.nan),
+        "distance_m": distance, "residual_s": fit.residual, "residual_m": fit.residual / emission_slowness,
+        "standardised": fit.standardised, "kept": fit.kept, "reason": reason, "line": line}, copy=False)
+    if fit.site is not None:
+        residuals["segment"] = np.where(rows >= 0, segments.segment_numbers(fit)[np.maximum(rows, 0)], 0)
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)

@@ -22,12 +22,20 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     the arrivals of its pairs look like outliers, and leaving them out hides the error sought (the median keeps a
     late arrival from counting)."""
     used = residuals["kept"].to_numpy(bool) if not rejected else np.isfinite(residuals["residual_m"].to_numpy(float))
-    kept = residuals.loc[used & (residuals["distance_m"].to_numpy(float) > 0), ["receiver", "tag", "residual_m"]]
-    keys = [kept["receiver"].astype(str), kept["tag"].astype(str)]
-    groups = kept["residual_m"].groupby(keys)
+    used = used & (residuals["distance_m"].to_numpy(float) > 0)
+    # grouped by one integer key of the two columns' codes, not by their texts (a season's arrivals: a groupby on two
+    # text keys makes its own lookups of every row's texts)
+    receiver, receivers = pd.factorize(residuals["receiver"].astype(str))
+    tag, tags = pd.factorize(residuals["tag"].astype(str))
+    n = max(len(tags), 1)
+    key = receiver[used].astype(np.int64) * n + tag[used]
+    groups = pd.Series(residuals["residual_m"].to_numpy(float)[used]).groupby(key)
     table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
-    table["scale"] = 1.4826 * (kept["residual_m"] - groups.transform("median")).abs().groupby(keys).median()
-    return table[table["count"] >= MIN_PAIR_ARRIVALS].reset_index()
+    table["scale"] = 1.4826 * (groups.obj - groups.transform("median")).abs().groupby(key).median()
+    table.insert(0, "tag", tags.take(table.index.to_numpy() % n))
+    table.insert(0, "receiver", receivers.take(table.index.to_numpy() // n))
+    table = table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
+    return table[table["count"] >= MIN_PAIR_ARRIVALS].reset_index(drop=True)
 
 
 def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receivers: pd.DataFrame

@@ -41,7 +41,10 @@ def _residuals(seed: int = 0, sigma: float = 1.0) -> tuple[pd.DataFrame, pd.Data
 @pytest.mark.parametrize("rejected", [False, True])
 def test_the_pairs_are_each_receiver_and_tags_kept_arrivals_at_a_distance(rejected):
     residuals, _, _ = _residuals()
-    table = pairs(residuals, rejected).set_index(["receiver", "tag"])
+    found = pairs(residuals, rejected)
+    keys = list(zip(found["receiver"], found["tag"]))
+    assert keys == sorted(keys)  # in the texts' order, as a groupby on them gives it
+    table = found.set_index(["receiver", "tag"])
     expected = {}
     for (receiver, tag), rows in residuals.groupby(["receiver", "tag"]):
         r = rows.loc[(rows["kept"] | rejected) & (rows["distance_m"] > 0), "residual_m"].to_numpy()
