@@ -25,6 +25,9 @@ import numpy as np
 from sblsim.models.tracking.ekf import TrackRecord, rts_gains
 from sblsim.models.tracking.toa import _evaluate_pings, per_receiver
 
+#: The pings whose arrivals' Jacobians (by θ: (pings, n, n dim + 1), 0.6 GiB for a record's 52,000 pings of 22
+#: receivers in 3-D) and consider terms are made at once.
+BLOCK = 2048
 
 def _jacobians(receivers: np.ndarray, c: float, states: np.ndarray, survey: np.ndarray, sigma_c: float
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -77,13 +80,15 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
     at = np.array(record.x_predicted, float)  # an update linearised at the prediction, a start at its fix
     fixed = sorted(starts & set(range(m)))
     at[fixed] = record.x_filtered[fixed]
-    J_all, Ht_all = _jacobians(receivers, c, at, survey, sc)
     R = np.asarray(sigma_toa, float) ** 2 if per_receiver(sigma_toa) else sigma_toa**2
     idx = list(range(dim)) + [2 * dim]
-    S = None
+    S, block = None, -1
     for k in range(record.start, m):
+        if k // BLOCK != block:  # the arrivals' Jacobians a block of pings at a time (each ping's its own)
+            block = k // BLOCK
+            J_all, Ht_all = _jacobians(receivers, c, at[block * BLOCK:(block + 1) * BLOCK], survey, sc)
         used = record.used[k]
-        J, Ht = J_all[k][used], Ht_all[k][used]
+        J, Ht = J_all[k % BLOCK][used], Ht_all[k % BLOCK][used]
         if k in starts:  # the fix the filter started from: its position, emission time, covariance and arrivals
             if per_receiver(R):
                 G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ (Ht / R[used][:, None])  # the fix's (dim + 1, θ)
@@ -105,10 +110,11 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
     return out
 
 
-def smoothed_sensitivity(record: TrackRecord, sensitivity: np.ndarray) -> np.ndarray:
+def smoothed_sensitivity(record: TrackRecord, sensitivity: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """The RTS smoother's sensitivity (module docstring) from its filter's record and the filter's
-    :func:`filter_sensitivity` (m, s, p); NaN before the start."""
-    out = np.array(sensitivity, float)
+    :func:`filter_sensitivity` (m, s, p); NaN before the start. ``overwrite``: made in ``sensitivity`` itself (a
+    float array; the recursion reads a ping's filter value before it writes its smoothed one), not in a copy."""
+    out = sensitivity if overwrite else np.array(sensitivity, float)
     k0 = record.start
     gains = rts_gains(record.P_filtered[k0:], record.P_predicted[k0:], record.F[k0:])
     for k in range(len(out) - 2, k0 - 1, -1):
@@ -116,9 +122,16 @@ def smoothed_sensitivity(record: TrackRecord, sensitivity: np.ndarray) -> np.nda
     return out
 
 
-def consider_terms(sensitivity: np.ndarray) -> np.ndarray:
-    """``S Sᵀ`` per ping (m, s, s) of a sensitivity (m, s, p) [the states' units²]."""
-    return np.einsum("kap,kbp->kab", sensitivity, sensitivity)
+def consider_terms(sensitivity: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+    """``S Sᵀ`` per ping (m, s, s) of a sensitivity (m, s, p) [the states' units²]; of its pings ``rows`` (r,) int
+    alone (r, s, s) where given, :data:`BLOCK` pings at a time (no copy of those rows' sensitivity made whole)."""
+    rows = np.arange(len(sensitivity)) if rows is None else np.asarray(rows)
+    s = sensitivity.shape[1]
+    out = np.empty((len(rows), s, s))
+    for lo in range(0, len(rows), BLOCK):
+        block = sensitivity[rows[lo:lo + BLOCK]]
+        out[lo:lo + BLOCK] = np.einsum("kap,kbp->kab", block, block)
+    return out
 
 
-__all__ = ["consider_terms", "filter_sensitivity", "smoothed_sensitivity"]
+__all__ = ["BLOCK", "consider_terms", "filter_sensitivity", "smoothed_sensitivity"]

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import json
 import textwrap
-from contextlib import ExitStack
+from contextlib import ExitStack, nullcontext
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
+from sblsim.orchestrator.io.memory import spilled
 from sblsim.orchestrator.readers.in_water import SAID
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
@@ -316,19 +317,22 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
             write(tag, folder / name)
     if outcome.sync is not None:
         write_sync(outcome.sync, folder / "sync")
-    drawn = _write_tracks(outcome, folder)
-    outcome.tags.to_csv(folder / "tags.csv", index=False)
-    outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
-    references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
-    if outcome.positions is not None:
-        outcome.positions.to_csv(folder / "positions.csv", index=False)
-    (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
-    fig = study_map(outcome, drawn)
-    try:
-        fig.savefig(folder / "map.png", dpi=110)
-    finally:
-        plt.close(fig)
-    study_report(outcome, folder)  # report.html (and detections_daily.csv): from the files above
+    # the synchronisation's row per sync-tag arrival, written, kept on disk while the tracks and the report are
+    # made (read back at the end: the outcome the study returns keeps it)
+    with spilled(outcome.sync, "residuals", folder) if outcome.sync is not None else nullcontext():
+        drawn = _write_tracks(outcome, folder)
+        outcome.tags.to_csv(folder / "tags.csv", index=False)
+        outcome.deployments.written().to_csv(folder / "receivers.csv", index=False)
+        references.table(outcome.summary.get("reference_tags")).to_csv(folder / "reference_tags.csv", index=False)
+        if outcome.positions is not None:
+            outcome.positions.to_csv(folder / "positions.csv", index=False)
+        (folder / "study.json").write_text(json.dumps(plain(outcome.summary), indent=2, allow_nan=False) + "\n")
+        fig = study_map(outcome, drawn)
+        try:
+            fig.savefig(folder / "map.png", dpi=110)
+        finally:
+            plt.close(fig)
+        study_report(outcome, folder)  # report.html (and detections_daily.csv): from the files above
 
 
 def _write_tracks(outcome: StudyOutcome, folder: Path) -> list:

@@ -301,6 +301,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         # the filters' and the RTS smoother's consider terms of the same survey and speed errors
         sensitivity = None if survey is None and not speed_sigma else filter_sensitivity(
             record, positions, c, sigma, survey, speed_sigma)
+        terms = None if sensitivity is None else consider_terms(sensitivity, k)  # the EKF's, before it is smoothed
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
@@ -317,16 +318,17 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
                  np.r_[record.restarts, segment_starts],
-                 None if sensitivity is None else consider_terms(smoothed_sensitivity(record, sensitivity)[k]))
+                 None if sensitivity is None else consider_terms(smoothed_sensitivity(record, sensitivity, True), k))
+            sensitivity = None  # (smoothed in place: the filter's no more)
         rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
              record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts],
-             None if sensitivity is None else consider_terms(sensitivity[k]))
+             terms)
         for name, other in filters.items():
             u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts],
-                 None if sensitivity is None else consider_terms(filter_sensitivity(
-                     other, positions, c, sigma, survey, speed_sigma)[u]))
+                 None if terms is None else consider_terms(filter_sensitivity(
+                     other, positions, c, sigma, survey, speed_sigma), u))
     f = np.flatnonzero(np.isfinite(fe))
     fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f],
                                                                         fused[f], survey)[:, :dim, :dim],

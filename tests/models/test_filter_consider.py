@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from sblsim.models.receiver import toa_tracking as tt
+from sblsim.models.tracking import filter_consider
 from sblsim.models.tracking.filter_consider import consider_terms, filter_sensitivity, smoothed_sensitivity
 
 R2 = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 75.0], [60.0, 140.0], [140.0, 20.0]])
@@ -48,6 +49,26 @@ def test_the_sensitivity_is_the_ekfs_and_the_rts_smoothers_own_change():
             ratio = np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
             cosine = np.einsum("ka,ka->k", a, b) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
             assert 0.9 <= ratio.min() and ratio.max() <= 1.1 and cosine.min() >= 0.99, (column, ratio, cosine)
+
+
+def test_the_jacobians_made_a_block_of_pings_at_a_time_give_the_same_sensitivity(monkeypatch):
+    """Each ping's arrivals' Jacobians are its own: made 7 pings at a time the sensitivity is the one made from the
+    whole record's at once, to the bit; so are the consider terms of some pings, 7 at a time, and the smoother's
+    sensitivity made in the filter's array."""
+    toa, _, _ = tt.simulate_pings(R2, 60, SETTINGS, np.random.default_rng(8), speed=0.2, detection=0.9)
+    record = tt.ToaTracker(R2, SETTINGS).run(toa)
+    whole = filter_sensitivity(record, R2, 1480.0, 1e-4, np.ones(len(R2)), 1.0)
+    monkeypatch.setattr(filter_consider, "BLOCK", 7)
+    blocks = filter_sensitivity(record, R2, 1480.0, 1e-4, np.ones(len(R2)), 1.0)
+    assert len(record.used) > 7 and np.isfinite(whole[record.start:]).all()
+    np.testing.assert_array_equal(blocks, whole)
+    rows = np.flatnonzero(record.used.any(axis=1))[1:]  # a ping's terms alone, a block at a time: each its own S Sᵀ
+    mine = whole[rows]
+    np.testing.assert_array_equal(filter_consider.consider_terms(whole, rows), np.einsum("kap,kbp->kab", mine, mine))
+    np.testing.assert_array_equal(filter_consider.consider_terms(mine), np.einsum("kap,kbp->kab", mine, mine))
+    smoothed = smoothed_sensitivity(record, whole)  # and smoothed in the filter's own array, as in a copy
+    assert smoothed_sensitivity(record, whole, overwrite=True) is whole
+    np.testing.assert_array_equal(whole, smoothed)
 
 
 def _nees_means(error: str, filters: tuple[str, ...]) -> dict:

@@ -122,7 +122,10 @@ def test_written_a_tag_at_a_time_the_reference_tags_rows_are_in_the_tracks(study
         assert len(matrix.toa) == len(matrix.pings) == 0 and matrix.toa.base is None
         for block in matrix.pings._mgr.blocks:  # (pandas' blocks: a NumPy array's base, an Arrow array's buffers)
             assert _held(block.values) < 1024
-    write_study(outcome, tmp_path)
+    residuals = outcome.sync.residuals.copy()
+    write_study(outcome, tmp_path)  # (its residuals kept on disk while its tracks and report are made)
+    pd.testing.assert_frame_equal(outcome.sync.residuals, residuals)  # the outcome's, back
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # nothing of it left in the folder
     assert set(_read(tmp_path, "tracks.csv")["tag"]) >= set(refs[:2])
     for name in ("tracks.csv", "reference_tags.csv", "tracks.geojson"):
         assert (tmp_path / name).read_text() == (out / name).read_text(), name
