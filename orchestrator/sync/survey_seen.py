@@ -29,9 +29,10 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     tag, tags = pd.factorize(residuals["tag"].astype(str))
     n = max(len(tags), 1)
     key = receiver[used].astype(np.int64) * n + tag[used]
-    groups = pd.Series(residuals["residual_m"].to_numpy(float)[used]).groupby(key)
+    values = pd.Series(residuals["residual_m"].to_numpy(float)[used])
+    groups = values.groupby(key)
     table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
-    table["scale"] = 1.4826 * (groups.obj - groups.transform("median")).abs().groupby(key).median()
+    table["scale"] = 1.4826 * (values - groups.transform("median")).abs().groupby(key).median()
     table.insert(0, "tag", tags.take(table.index.to_numpy() % n))
     table.insert(0, "receiver", receivers.take(table.index.to_numpy() // n))
     table = table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
