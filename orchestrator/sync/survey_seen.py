@@ -35,8 +35,8 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     table["scale"] = 1.4826 * (values - groups.transform("median")).abs().groupby(key).median()
     table.insert(0, "tag", tags.take(table.index.to_numpy() % n))
     table.insert(0, "receiver", receivers.take(table.index.to_numpy() // n))
-    table = table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
-    return table[table["count"] >= MIN_PAIR_ARRIVALS].reset_index(drop=True)
+    table = table[table["count"] >= MIN_PAIR_ARRIVALS]
+    return table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
 
 
 def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receivers: pd.DataFrame
