@@ -302,6 +302,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         sensitivity = None if survey is None and not speed_sigma else filter_sensitivity(
             record, positions, c, sigma, survey, speed_sigma)
         terms = None if sensitivity is None else consider_terms(sensitivity, k)  # the EKF's, before it is smoothed
+        # the RTS smoother's (its filter's record alone), taken before the robust smoother's track: the sensitivity,
+        # (pings, states, receivers × dim + 1) numbers, is let go there, not held through that track's peak
+        smoothed = None if sensitivity is None or not smooth else consider_terms(
+            smoothed_sensitivity(record, sensitivity, True), k)
+        sensitivity = None  # (smoothed in place: the filter's no more)
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
@@ -317,9 +322,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
                      (robust.weights >= tt.ROBUST_KEPT_WEIGHT).sum(axis=1), segment_starts, extra)
             rows("rts", k, xs[k, -2], xs[k, :dim], Ps[k][:, :dim, :dim], record.used[k].sum(axis=1),
-                 np.r_[record.restarts, segment_starts],
-                 None if sensitivity is None else consider_terms(smoothed_sensitivity(record, sensitivity, True), k))
-            sensitivity = None  # (smoothed in place: the filter's no more)
+                 np.r_[record.restarts, segment_starts], smoothed)
         rows("ekf", k, record.x_filtered[k, -2], record.x_filtered[k, :dim], record.P_filtered[k][:, :dim, :dim],
              record.used[k].sum(axis=1), np.r_[record.restarts, segment_starts],
              terms)
