@@ -306,7 +306,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         # (pings, states, receivers × dim + 1) numbers, is let go there, not held through that track's peak
         smoothed = None if sensitivity is None or not smooth else consider_terms(
             smoothed_sensitivity(record, sensitivity, True), k)
-        sensitivity = None  # (smoothed in place: the filter's no more)
+        sensitivity = None  # (the EKF's and the RTS smoother's terms taken; smoothed in place where smoothed)
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
