@@ -1,6 +1,7 @@
 """Still tags: the verdict "moved beyond what its error terms allow" and the σ of its place, on simulated records.
 
-Run:  python benchmarks/bench_still_tags.py [--seeds N]
+Run:  python benchmarks/bench_still_tags.py [--seeds N] [--interval LO HI] [--pings N] [--receivers K]
+                                             [--reflection SHARE]
 
 A tag at a fixed place among 8 receivers (1 km × 0.8 km), a ping every 120 ± 24 s over a day, each receiver hearing
 80 % with 0.1 ms noise, in water whose sound speed is 1,480 ± 5 m/s over the day (a sine of random phase), tracked as
@@ -10,6 +11,12 @@ truth with the covariance reported; the same tags' fixes under the permutation t
 before: :func:`sblsim.models.tracking.stationary.moved`); a tag moved 20 m at its 360th ping, where its rows are
 flagged from; a random walk of 2 m per ping (an animal); and the verdict's own time on 10⁴ fixes, still and moved
 (best of three). Prints a JSON line last.
+
+The record varied the way real still tags' records differ: ``--interval`` the pings' interval [s] (uniform between
+the two: a sync tag's 540 660), ``--pings`` their count (a season's), ``--receivers`` the first K receivers alone (4
+to 8: an array that lost some), ``--reflection`` the share of the record [0, 1) in which receiver H2 hears a
+reflection in place of the direct path (a path longer by 8 to 15 m, in episodes of 2 to 12 hours: a reflection
+that comes and goes with the water level).
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ import argparse
 import json
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,25 +37,66 @@ SIGMA = 1e-4
 PINGS = 720
 
 
-def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float | None = None):
+@dataclass(frozen=True)
+class Record:
+    """How a simulated record is made (the module docstring): the pings' interval [s], their count, the receivers
+    used, and the share of the record a reflection replaces H2's direct path."""
+
+    interval: tuple[float, float] = (96.0, 144.0)
+    pings: int = PINGS
+    receivers: int = len(RECEIVERS)
+    reflection: float = 0.0
+
+    def __str__(self) -> str:
+        said = f"a ping every {self.interval[0]:g}-{self.interval[1]:g} s, {self.pings} pings"
+        said += f", {self.receivers} receivers"
+        return said + (f", a reflection at H2 {100 * self.reflection:g} % of the time" if self.reflection else "")
+
+
+def _reflected(rng: np.random.Generator, t: np.ndarray, share: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the pings at times ``t`` (n,) [s] a reflection replaces, in episodes of 2 to 12 hours covering about
+    ``share`` of the record, and its excess path (n,) [m] (8 to 15 m, one per episode)."""
+    on = np.zeros(len(t), bool)
+    excess = np.zeros(len(t))
+    if share <= 0:
+        return on, excess
+    span = t[-1] - t[0]
+    covered = 0.0
+    while covered < share * span:
+        length = rng.uniform(2.0, 12.0) * 3600.0
+        start = rng.uniform(t[0] - length, t[-1])
+        here = (t >= start) & (t < start + length) & ~on
+        on |= here
+        excess[here] = rng.uniform(8.0, 15.0)
+        covered += length
+    return on, excess
+
+
+def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float | None = None,
+           how: Record = Record()):
     """A simulated record's TOA and receivers files in ``folder``, and the tag's place at each ping (module
     docstring)."""
     from sblsim.orchestrator.tracks.variants import write_toa
 
     rng = np.random.default_rng(seed)
-    t = np.cumsum(rng.uniform(96.0, 144.0, PINGS))
+    n = how.pings
+    receivers = RECEIVERS[:how.receivers]
+    t = np.cumsum(rng.uniform(*how.interval, n))
     c = 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 2 * np.pi))
-    places = np.repeat(TAG[None], PINGS, axis=0)
+    places = np.repeat(TAG[None], n, axis=0)
     if move is not None:
-        places[PINGS // 2:] += move
+        places[n // 2:] += move
     if walk is not None:
-        places = places + np.cumsum(rng.normal(scale=walk, size=(PINGS, 2)), axis=0)
-    toa = t[:, None] + np.linalg.norm(places[:, None] - RECEIVERS[None], axis=2) / c[:, None]
+        places = places + np.cumsum(rng.normal(scale=walk, size=(n, 2)), axis=0)
+    path = np.linalg.norm(places[:, None] - receivers[None], axis=2)
+    on, excess = _reflected(np.random.default_rng([seed, 1]), t, how.reflection)  # (its own draws: the rest alike)
+    path[:, 1] += np.where(on, excess, 0.0)
+    toa = t[:, None] + path / c[:, None]
     toa = toa + SIGMA * rng.normal(size=toa.shape)
     toa[rng.random(toa.shape) > 0.8] = np.nan
-    names = [f"H{k + 1}" for k in range(len(RECEIVERS))]
+    names = [f"H{k + 1}" for k in range(len(receivers))]
     write_toa(folder / "toa.txt", toa, names)
-    rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(names, RECEIVERS))
+    rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(names, receivers))
     (folder / "receivers.csv").write_text("name,x_m,y_m\n" + rows + "\n")
     return folder / "toa.txt", folder / "receivers.csv", places
 
@@ -80,13 +129,13 @@ def verdict_time(moved_by: float) -> float:
     return best
 
 
-def measure(seeds: int) -> dict:
-    """The figures (module docstring)."""
+def measure(seeds: int, how: Record = Record()) -> dict:
+    """The figures (module docstring) on records made as ``how`` says."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         nees, flagged, rows, order_moved, seconds = [], 0, 0, 0, []
         for seed in range(seeds):
-            outcome, places, took = tracked(folder, seed)
+            outcome, places, took = tracked(folder, seed, how=how)
             still = outcome.summary["motion"]["still"]
             e = np.asarray(still["place"]) - places[0]
             nees.append(float(e @ np.linalg.solve(np.asarray(still["covariance"]), e)))
@@ -96,15 +145,16 @@ def measure(seeds: int) -> dict:
             seconds.append(took)
         offsets, before_ok, distance = [], [], []
         for seed in range(5):
-            outcome, places, _ = tracked(folder, seed, move=np.array([20.0, 0.0]))
+            outcome, places, _ = tracked(folder, seed, move=np.array([20.0, 0.0]), how=how)
             reasons = outcome.track["quality_reason"].str.contains("tag_moved").to_numpy()
             first = int(np.argmax(reasons)) if reasons.any() else len(reasons)
-            offsets.append(first - PINGS // 2)
+            offsets.append(first - how.pings // 2)
             before_ok.append(bool((outcome.track["quality"].to_numpy()[:first] == "ok").all()))
             change = outcome.summary["motion"]["still"]["change"]
             distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])))
-        animals = [tracked(folder, seed, walk=2.0)[0].summary["motion"]["still"]["verdict"] for seed in range(5)]
-    return {"seeds": seeds, "rows": rows, "flagged": flagged, "share_flagged": flagged / rows,
+        animals = [tracked(folder, seed, walk=2.0, how=how)[0].summary["motion"]["still"]["verdict"]
+                   for seed in range(5)]
+    return {"record": str(how), "seeds": seeds, "rows": rows, "flagged": flagged, "share_flagged": flagged / rows,
             "nees_mean": float(np.mean(nees)), "nees_median": float(np.median(nees)),
             "order_test_moved": order_moved, "track_s_median": float(np.median(seconds)),
             "moved_first_flag_offsets": offsets, "moved_rows_before_ok": before_ok,
@@ -115,16 +165,35 @@ def measure(seeds: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=20, help="still tags simulated")
+    parser.add_argument("--interval", type=float, nargs=2, default=Record.interval, metavar=("LO", "HI"),
+                        help="the pings' interval [s], uniform between the two (default 96 144)")
+    parser.add_argument("--pings", type=int, default=PINGS, help=f"pings a record (default {PINGS})")
+    parser.add_argument("--receivers", type=int, default=len(RECEIVERS),
+                        help=f"the first K receivers alone (4 to {len(RECEIVERS)})")
+    parser.add_argument("--reflection", type=float, default=0.0,
+                        help="the share of the record a reflection replaces H2's direct path [0, 1)")
     args = parser.parse_args()
     if args.seeds < 1:
         parser.error("--seeds: must be at least 1")
-    r = measure(args.seeds)
-    print(f"{r['seeds']} still tags in water of 1480 ± 5 m/s over a day: {r['flagged']} of {r['rows']} rows flagged "
-          f"({100 * r['share_flagged']:.1f} %), mean 2-D NEES {r['nees_mean']:.2f} (median {r['nees_median']:.2f}); "
+    if not 0 < args.interval[0] <= args.interval[1]:
+        parser.error(f"--interval: {args.interval[0]:g} {args.interval[1]:g}; allowed: 0 < LO <= HI [s]")
+    if args.pings < 40:
+        parser.error(f"--pings: {args.pings}; allowed: 40 or more")
+    if not 4 <= args.receivers <= len(RECEIVERS):
+        parser.error(f"--receivers: {args.receivers}; allowed: 4 to {len(RECEIVERS)}")
+    if not 0 <= args.reflection < 1:
+        parser.error(f"--reflection: {args.reflection:g}; allowed: 0 <= SHARE < 1")
+    how = Record(tuple(args.interval), args.pings, args.receivers, args.reflection)
+    r = measure(args.seeds, how)
+    print(f"records: {how}")
+    print(f"{r['seeds']} still tags in water of 1480 ± 5 m/s (a sine of a day): {r['flagged']} of {r['rows']} rows "
+          f"flagged ({100 * r['share_flagged']:.1f} %), mean 2-D NEES {r['nees_mean']:.2f} "
+          f"(median {r['nees_median']:.2f}); "
           f"the permutation test of their fixes' order alone says {r['order_test_moved']} of {r['seeds']} moved; "
           f"a still tag tracked in {r['track_s_median']:.2f} s (median)")
     second = np.round(r["moved_second_place_error_m"], 2).tolist()
-    print(f"moved 20 m at ping {PINGS // 2}: first flagged row {r['moved_first_flag_offsets']} pings from the move, "
+    print(f"moved 20 m at ping {how.pings // 2}: first flagged row {r['moved_first_flag_offsets']} pings from the move,"
+          " "
           f"the rows before ok {r['moved_rows_before_ok']}, the second place {second} m from where it went; a random "
           f"walk of 2 m per ping: {r['animal_verdicts']}")
     print(f"the verdict on 10^4 fixes: {r['verdict_1e4_still_s']:.3f} s still, {r['verdict_1e4_moved_s']:.3f} s moved "

@@ -22,10 +22,10 @@ SIGMA = 1e-4
 
 
 def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = None,
-            walk: float | None = None) -> tuple[Path, Path, np.ndarray]:
-    """A tag's times of arrival (a ping every 120 ± 24 s over a day, each receiver hearing 80 % of them with 0.1 ms
-    noise) in water of 1,480 ± 5 m/s (a sine over the day, random phase): the TOA file, the receivers file and the
-    tag's place at each ping."""
+            walk: float | None = None, receivers: int = len(RECEIVERS)) -> tuple[Path, Path, np.ndarray]:
+    """A tag's times of arrival (a ping every 120 ± 24 s over a day, each of the first ``receivers`` receivers
+    hearing 80 % of them with 0.1 ms noise) in water of 1,480 ± 5 m/s (a sine over the day, random phase): the TOA
+    file, the receivers file and the tag's place at each ping."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(96.0, 144.0, n))
     c = 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 2 * np.pi))
@@ -34,11 +34,11 @@ def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = N
         places[n // 2:] += move
     if walk is not None:
         places = places + np.cumsum(rng.normal(scale=walk, size=(n, 2)), axis=0)
-    toa = t[:, None] + np.linalg.norm(places[:, None] - RECEIVERS[None], axis=2) / c[:, None]
+    toa = t[:, None] + np.linalg.norm(places[:, None] - RECEIVERS[None, :receivers], axis=2) / c[:, None]
     toa = toa + SIGMA * rng.normal(size=toa.shape)
     toa[rng.random(toa.shape) > 0.8] = np.nan
-    write_toa(tmp_path / "toa.txt", toa, NAMES)
-    rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(NAMES, RECEIVERS))
+    write_toa(tmp_path / "toa.txt", toa, NAMES[:receivers])
+    rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(NAMES, RECEIVERS[:receivers]))
     (tmp_path / "receivers.csv").write_text("name,x_m,y_m\n" + rows + "\n")
     return tmp_path / "toa.txt", tmp_path / "receivers.csv", places
 
@@ -95,3 +95,21 @@ def test_an_animal_tracked_as_still_is_moving(tmp_path):
     outcome = track(toa, receivers, motion="stationary", toa_sigma=SIGMA, other_filters=False)
     assert outcome.summary["motion"]["still"]["verdict"] == "moving" and outcome.summary["motion"]["moved"]
     assert outcome.track["quality_reason"].str.contains("tag_moved").all()
+
+
+def test_four_receivers_calibrate_a_still_tags_speed_from_it_as_one_place(tmp_path):
+    """Four receivers (no ping heard by the five a ping-by-ping calibration needs): tracked as still, the speed is
+    calibrated from the pings as one place, within 3 m/s of the water's mean, the place within χ²(2)'s 99.9 % of the
+    truth under its reported covariance, no row flagged; tracked as moving, the same record keeps the default
+    speed's fallback (the pings' one place is a still tag's alone)."""
+    toa, receivers, places = _record(tmp_path, 3, receivers=4)
+    outcome = track(toa, receivers, motion="stationary", toa_sigma=SIGMA, other_filters=False)
+    speed = outcome.summary["sound_speed"]
+    assert speed["source"] == "calibrated" and "as one place" in speed["method"], speed
+    assert abs(speed["sound_speed_m_s"] - 1480.0) < 3.0, speed
+    still = outcome.summary["motion"]["still"]
+    e = np.asarray(still["place"]) - places[0]
+    assert still["verdict"] == "still" and e @ np.linalg.solve(np.asarray(still["covariance"]), e) < 13.8, still
+    assert (outcome.track["quality"] == "ok").all(), outcome.track["quality_reason"].value_counts()
+    moving = track(toa, receivers, toa_sigma=SIGMA, other_filters=False, smooth=False)
+    assert moving.summary["sound_speed"]["source"] == "fallback", moving.summary["sound_speed"]
