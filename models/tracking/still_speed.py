@@ -5,24 +5,26 @@ time (:func:`~sblsim.models.tracking.calibration.calibrate_sound_speed` takes pi
 more: an array of four in 2-D has none, and its tags fall back on a default speed 51 m/s uncertain). A still tag's
 pings share one place: every arrival ``toa_ij = t_j + ‖p − r_i‖ s`` (ping j's emission time ``t_j``, the place ``p``,
 the slowness ``s = 1/c``), and the record's time differences between receivers tell the place and the slowness
-together wherever dim + 2 receivers hear it. The place, the slowness and every emission time are fitted by scipy's
-``least_squares`` (soft-L1 loss at :data:`~sblsim.models.tracking.calibration.ROBUST_SCALE` σ: a late arrival of a
-reflection counts as in an L1 fit), the Jacobian sparse (each arrival touches its ping's time, the place and the
-slowness). As the per-ping calibration does, the record is cut into stretches, each fitted alone, and their median
-kept, its standard error ``1.2533 s / √K`` (s their spread; the median's efficiency 2/π): the water's sound speed
-changes over a record, and the stretches' spread is what that change leaves in one speed for it all.
+together wherever dim + 2 receivers hear it (in 2-D: in 3-D the tag's depth trades with the speed, as the per-ping
+calibration's depth term says). The place, the slowness and every emission time are fitted by scipy's
+``least_squares``: least squares from the receivers' centroid, then the soft-L1 loss at
+:data:`~sblsim.models.tracking.calibration.ROBUST_SCALE` σ from there (a late arrival of a reflection counts as in an
+L1 fit; far from the solution every residual would be an outlier), each arrival's Jacobian row touching its ping's
+time, the place and the slowness alone. As the per-ping calibration does, the record is cut into stretches, each
+fitted alone, and their median kept, its standard error ``1.2533 s / √K`` (s their spread; the median's efficiency
+2/π): the water's sound speed changes over a record, and the stretches' spread is what that change leaves in one speed
+for it all.
 
 References
 ----------
 Triggs, McLauchlan, Hartley, Fitzgibbon, "Bundle adjustment — a modern synthesis", Vision Algorithms 1999, LNCS 1883
-(the points' and cameras' joint fit, its Jacobian's sparsity); Huber & Ronchetti, *Robust Statistics*, Wiley 2009,
+(the points' and cameras' joint fit); Huber & Ronchetti, *Robust Statistics*, Wiley 2009,
 § 3.2 (the median of independent estimates).
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.optimize import least_squares
 
 from sblsim.models.declarations import ModelError
@@ -58,19 +60,19 @@ def _stretch(toa: np.ndarray, receivers: np.ndarray, sigma: np.ndarray, start: n
         rho = np.linalg.norm(p[None] - receivers[receiver], axis=1)
         return (times - origin - t[ping] - rho * s) * weight
 
-    n = len(times)
-    cols = np.r_[np.tile(np.arange(dim + 1), n), dim + 1 + ping]
-    at = np.r_[np.repeat(np.arange(n), dim + 1), np.arange(n)]
+    arrivals = np.arange(len(times))
 
-    def jacobian(x):
+    def jacobian(x):  # (arrivals, dim + 1 + pings): the place and the slowness, then its own ping's time
         p, s, _ = unpack(x)
         d = p[None] - receivers[receiver]
         rho = np.maximum(np.linalg.norm(d, axis=1), 1e-9)
-        block = np.column_stack([-s * d / rho[:, None], -rho]) * weight[:, None]
-        return sp.csr_matrix((np.r_[block.ravel(), -weight], (at, cols)), shape=(n, dim + 1 + m)).toarray()
+        out = np.zeros((len(times), dim + 1 + m))
+        out[:, :dim + 1] = np.column_stack([-s * d / rho[:, None], -rho]) * weight[:, None]
+        out[arrivals, dim + 1 + ping] = -weight
+        return out
 
     x0 = np.r_[start, s0, t0 - origin]
-    try:  # least squares from the start, then the soft-L1 fit from there (far from it every residual is an outlier)
+    try:
         first = least_squares(residuals, x0, jac=jacobian, method="lm", x_scale="jac", max_nfev=200)
         fit = least_squares(residuals, first.x, jac=jacobian, loss="soft_l1", f_scale=ROBUST_SCALE, x_scale="jac",
                             method="trf", tr_solver="exact", max_nfev=100)
@@ -91,11 +93,11 @@ def calibrate_still_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_to
     toa : numpy.ndarray
         (m, n) [s] times of arrival, NaN where not heard.
     receivers : numpy.ndarray
-        (n, dim) [m] the receivers' positions.
+        (n, 2) [m] the receivers' positions.
     sigma_toa : float or numpy.ndarray
         [s] a time of arrival's σ, one or (n,) per receiver.
     start : numpy.ndarray, optional
-        (dim,) [m] where the place's fit starts (a fix's median); None: the centroid of the receivers heard.
+        (2,) [m] where the place's fit starts (a fix's median); None: the centroid of the receivers heard.
     batches : int
         K, the stretches (at least 3 fitted, or the calibration is refused).
     max_pings : int
@@ -112,12 +114,15 @@ def calibrate_still_sound_speed(toa: np.ndarray, receivers: np.ndarray, sigma_to
     Raises
     ------
     ModelError
-        Fewer than dim + 2 receivers hear the tag (its place and speed are not told apart), or fewer than 3 stretches
-        can be fitted (one line each).
+        Receivers not in 2-D, fewer than 4 receivers hear the tag (its place and speed are not told apart), or fewer
+        than 3 stretches can be fitted (one line each).
     """
     toa = np.asarray(toa, float)
     receivers = np.asarray(receivers, float)
     dim = receivers.shape[1]
+    if dim != 2:
+        raise ModelError(f"still sound speed: receivers in {dim}-D; allowed: 2-D (in 3-D the tag's depth trades with "
+                         "the speed: give the sound speed)")
     heard = np.isfinite(toa).any(axis=0)
     if heard.sum() < dim + 2:
         raise ModelError(f"still sound speed: {int(heard.sum())} receivers hear the tag; at least {dim + 2} are "

@@ -74,3 +74,10 @@ def test_a_record_too_short_for_its_stretches_is_refused():
     toa, _ = _record(0, lambda t: np.full(len(t), 1480.0), pings=40)
     with pytest.raises(ModelError, match="stretches of the record fitted; at least 3 are needed"):
         calibrate_still_sound_speed(toa, RECEIVERS, SIGMA)
+
+
+def test_receivers_in_3d_are_refused_in_one_line():
+    """In 3-D the tag's depth trades with the speed (the per-ping calibration's depth term): refused, not guessed."""
+    toa, _ = _record(0, lambda t: np.full(len(t), 1480.0))
+    with pytest.raises(ModelError, match="receivers in 3-D; allowed: 2-D"):
+        calibrate_still_sound_speed(toa, np.c_[RECEIVERS, [-5.0, -6.0, -5.0, -6.0]], SIGMA)
