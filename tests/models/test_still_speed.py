@@ -39,8 +39,8 @@ def test_four_receivers_tell_a_still_tags_speed(seed):
 
 def test_each_stretch_follows_the_water_and_the_error_holds_its_spread():
     """1,480 ± 5 m/s over a day (a sine): each stretch's speed within 1.5 m/s of the simulated speed's mean over it
-    (each stretch fits its own place, which trades a little with the speed),
-    and the median's standard error is that of the stretches' spread (1.2533 s / √K)."""
+    (each stretch fits its own place, which trades a little with the speed); the median's standard error is that of
+    the stretches' spread (1.2533 s / √K)."""
     def speed(t):
         return 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + 0.3)
 
