@@ -119,7 +119,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                       salinity: float | None = None, depth: np.ndarray | None = None,
                       depth_sigma: float = DEPTH_SIGMA, time_origin: float | None = None,
                       sigma_toa: float | np.ndarray = SIGMA_TOA, temperature_path: Path | None = None,
-                      water: Water | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
+                      water: Water | None = None, still: bool = False) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``,
     :func:`~sblsim.orchestrator.readers.time_series.read_sound_speed_series`) whose median is the reference speed and
@@ -137,7 +137,10 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     (``temperature_path``, :func:`~sblsim.orchestrator.readers.water.read_temperature_series`) is made a measured
     series by TEOS-10 at ``salinity`` (practical) in the ``water`` (:class:`Water`: the depth and position of the
     pressure and the absolute salinity), which also places the fallback and the speeds the stated water can have: a
-    calibration outside them is replaced by the water's own speed (:data:`REPLACED_SOURCE`).
+    calibration outside them is replaced by the water's own speed (:data:`REPLACED_SOURCE`). A ``still`` tag's pings
+    that cannot be fitted one by one (an array of four) are calibrated as one place
+    (:func:`~sblsim.models.tracking.still_speed.calibrate_still_sound_speed`) before the fallback is taken; where that
+    fails too, the fallback says why (``still_calibration``).
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.tracking.calibration import calibrate_sound_speed
 
@@ -170,22 +173,33 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
         calibration = calibrate_sound_speed(toa, positions, sigma_toa, strict=False, depth=depth,
                                             depth_sigma=depth_sigma)
     except ModelError as exc:
-        return toa, prior, {"sound_speed_m_s": prior, "source": "fallback", "method": words,
-                            "sigma_m_s": prior_sigma, "calibration": str(exc)}
-    method = f"median of {len(calibration.batches)} stretches' joint soft-L1 fits" if calibration.batches else \
-        "one joint soft-L1 fit (a record too short for stretches)"
-    speed = _calibrated(calibration, method, temperature, salinity, water)
+        fallback = {"sound_speed_m_s": prior, "source": "fallback", "method": words, "sigma_m_s": prior_sigma,
+                    "calibration": str(exc)}
+        if not still:
+            return toa, prior, fallback
+        from sblsim.models.tracking.still_speed import calibrate_still_sound_speed
+
+        try:
+            calibration = calibrate_still_sound_speed(toa, positions, sigma_toa)
+        except ModelError as why:
+            return toa, prior, fallback | {"still_calibration": str(why)}
+        method = (f"median of {len(calibration.batches)} stretches' joint soft-L1 fits of the tag as one place (its "
+                  f"pings one by one could not: {exc})")
+    else:
+        method = f"median of {len(calibration.batches)} stretches' joint soft-L1 fits" if calibration.batches else \
+            "one joint soft-L1 fit (a record too short for stretches)"
+    speed = _calibrated(calibration, method, (prior, prior_sigma, words), temperature, salinity, water)
     return toa, speed["sound_speed_m_s"], speed
 
 
-def _calibrated(calibration, method: str, temperature: float | None, salinity: float | None, water: Water
-                ) -> dict[str, Any]:
+def _calibrated(calibration, method: str, fallback: tuple[float, float, str], temperature: float | None,
+                salinity: float | None, water: Water) -> dict[str, Any]:
     """What a calibration (:class:`~sblsim.models.tracking.calibration.Calibration`, made by ``method``) gives:
-    combined with the fallback's prior where weakly determined, replaced where the stated water cannot have it."""
+    combined with the ``fallback``'s prior (its speed [m/s], σ [m/s] and words) where weakly determined, replaced
+    where the stated water cannot have it."""
     from sblsim.models.tracking.calibration import MAX_SIGMA
 
-    prior, prior_sigma, words = ss.fallback_prior(temperature, salinity, water.depth, water.latitude,
-                                                  water.longitude)
+    prior, prior_sigma, words = fallback
     speed = {"sound_speed_m_s": calibration.c, "source": "calibrated", "method": method,
              "sigma_m_s": calibration.sigma, "pings": calibration.pings,
              "stretches_m_s": [None if not np.isfinite(v) else v for v in calibration.batches]}
@@ -198,27 +212,6 @@ def _calibrated(calibration, method: str, temperature: float | None, salinity: f
                   "prior_sigma_m_s": prior_sigma, "prior": words,
                   "disagreement_sigmas": abs(calibration.c - prior) / float(np.hypot(calibration.sigma, prior_sigma))}
     return _plausible(speed, temperature, salinity, water)
-
-
-def still_speed(toa: np.ndarray, positions: np.ndarray, c: float, speed: dict[str, Any],
-                sigma_toa: float | np.ndarray, temperature: float | None = None, salinity: float | None = None,
-                water: Water | None = None) -> tuple[float, dict[str, Any]]:
-    """A still tag's sound speed [m/s] and what was done: where :func:`sound_speed_stage` fell back on the default
-    (no pings heard by enough receivers to calibrate it one by one: an array of four), calibrated from the pings as
-    one place (:func:`~sblsim.models.tracking.still_speed.calibrate_still_sound_speed`); else ``c`` and ``speed`` as
-    they are. Where that fails too, the fallback stays and ``speed`` says why (``still_calibration``)."""
-    from sblsim.models.tracking.still_speed import calibrate_still_sound_speed
-
-    if speed.get("source") != "fallback":
-        return c, speed
-    try:
-        calibration = calibrate_still_sound_speed(toa, positions, sigma_toa)
-    except ModelError as exc:
-        return c, speed | {"still_calibration": str(exc)}
-    method = (f"median of {len(calibration.batches)} stretches' joint soft-L1 fits of the tag as one place (its pings "
-              f"one by one could not: {speed.get('calibration', 'no calibration')})")
-    still = _calibrated(calibration, method, temperature, salinity, Water() if water is None else water)
-    return still["sound_speed_m_s"], still
 
 
 def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, path: Path, what: str,
@@ -254,4 +247,4 @@ def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, pa
 
 
 __all__ = ["REPLACED_SOURCE", "SPEED_CHECK_SIGMAS", "TEMPERATURE_SOURCE", "Water", "replaced_line",
-           "sound_speed_stage", "speed_check", "still_speed"]
+           "sound_speed_stage", "speed_check"]

@@ -49,7 +49,7 @@ from sblsim.orchestrator.tracks.depth import (
 )
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
-from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage, still_speed
+from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
 from sblsim.orchestrator.tracks.tracker import (
     DEPTH_SIGMA,
@@ -177,9 +177,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         receivers.clock_sigma[[receivers.names.index(n) for n in names]]
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
-                                      water=water)
-    if motion == "stationary":  # a still tag's pings one place: its speed from them where one by one they could not
-        c, speed = still_speed(toa, positions, c, speed, sigma, temperature, salinity, water)
+                                      water=water, still=motion == "stationary")  # a still tag's pings one place
     if fixed_depth is not None:  # one depth given: against where the arrivals put the tag with its depth free, at a
         # speed the given depth did not calibrate
         free_c = c if speed["source"] in ("given", "measured series", TEMPERATURE_SOURCE) else sound_speed_stage(
@@ -198,9 +196,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             # pings (or fallen back where they could not be fitted): again with the prior; the times of arrival as
             # read (none rescaled)
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma,
-                                              sigma_toa=sigma, water=water)
-            if motion == "stationary":
-                c, speed = still_speed(toa, positions, c, speed, sigma, temperature, salinity, water)
+                                              sigma_toa=sigma, water=water, still=motion == "stationary")
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2, dim,
                                None if depth is None else np.isfinite(depth))
