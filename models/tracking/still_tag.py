@@ -14,6 +14,7 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import still as sv
+from sblsim.models.tracking.smoother_cost import ROBUST_DOF
 from sblsim.models.tracking.timing import SIGMA_TOA
 
 
@@ -96,6 +97,33 @@ def receivers_term(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
     from sblsim.models.tracking.stationary import receiver_jackknife
 
     return receiver_jackknife(toa, positions, c, sigma_toa, pooled)[1]
+
+
+def split_ping(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarray, first: np.ndarray,
+               second: np.ndarray, dof: float = ROBUST_DOF) -> int:
+    """Where a still tag that moved once went from its first place to its second among the pings ``toa`` (k, n) [s]
+    between its last still trusted fix and its first moved one (pings without a trusted fix: heard by too few
+    receivers, or a fix the quality check set aside): the row ``s`` (0 ≤ s ≤ k) from which the pings' arrivals fit
+    ``second`` (dim,) [m] better than ``first`` (dim,) [m] in their Student-t cost summed, the rows before ``s`` at
+    the first place and the rest at the second (a change point of the arrivals' own likelihood: Hinkley, Biometrika
+    57(1), 1970). Each ping's cost at a place: its arrivals' ``(ν + 1) ln(1 + z² / ν)``, ``z`` the time of arrival
+    less the range over ``c`` [m/s], less the ping's emission time (their mean weighed by ``1 / σ_i²``), over the
+    receiver's ``sigma`` (n,) [s]. A ping heard by one receiver fits both places alike; of equal costs the earliest
+    split is taken (those rows flagged: no arrival says they stayed)."""
+    toa = np.asarray(toa, float)
+    heard = np.isfinite(toa)
+    y = np.where(heard, toa, 0.0)
+    w = np.where(heard, 1.0 / sigma**2, 0.0)
+    total = np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+
+    def cost(place: np.ndarray) -> np.ndarray:  # (k,)
+        emitted = y - np.linalg.norm(place[None, :] - positions, axis=1)[None, :] / c
+        z = (emitted - (w * emitted).sum(axis=1, keepdims=True) / total) / sigma
+        return np.where(heard, (dof + 1.0) * np.log1p(z**2 / dof), 0.0).sum(axis=1)
+
+    at_first, at_second = cost(np.asarray(first, float)), cost(np.asarray(second, float))
+    totals = np.concatenate([[0.0], np.cumsum(at_first)]) + np.concatenate([np.cumsum(at_second[::-1])[::-1], [0.0]])
+    return int(np.argmin(totals))
 
 
 @dataclass(frozen=True)
@@ -200,24 +228,32 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     places = np.repeat(pooled.position[None], m, axis=0)
     own, held = np.repeat(pooled.covariance[None], m, axis=0), np.repeat(extra[None], m, axis=0)
     after, change = np.zeros(m, bool) | (went and verdict.throughout), None
-    if went and not verdict.throughout:  # the rows after the last still fix moved
-        last = int(verdict.order[verdict.change - 1])
-        after[last + 1:] = True
-        pooled, extra, spread, gains = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma,
-                                              clock_sigma)
-        emissions[:], kept[:] = _rows(pooled, rows[:last + 1], m)
-        places[:last + 1], own[:last + 1], held[:last + 1] = pooled.position, pooled.covariance, extra
-        first = int(verdict.order[verdict.change])
+    if went and not verdict.throughout:  # the rows from the split moved
+        last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
-        try:  # where it went: the pooled fit of the rows after
-            gone, gone_extra, _, _ = _place(toa, positions, c, fx, rows[last + 1:], sigma_toa, survey, speed_sigma,
+        before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
+        split = last + 1
+        try:  # the rows between the two trusted fixes: each side's place from its own side's rows
+            gone = _place(toa, positions, c, fx, rows[first:], sigma_toa, survey, speed_sigma, clock_sigma)[0]
+        except ModelError:
+            gone = None
+        if gone is not None and first > last + 1:
+            split = split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone.position) + last + 1
+        after[split:] = True
+        pooled, extra, spread, gains = before if split == last + 1 else _place(
+            toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
+        emissions[:], kept[:] = _rows(pooled, rows[:split], m)
+        places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
+        change["split_ping"] = split
+        try:  # where it went: the pooled fit of the rows from the split
+            gone, gone_extra, _, _ = _place(toa, positions, c, fx, rows[split:], sigma_toa, survey, speed_sigma,
                                          clock_sigma)
         except ModelError:  # too few receivers heard it there: its fixes' median
-            change |= {"second_place": np.nanmedian(fx[last + 1:], axis=0).tolist(), "second_place_sigma_m": None}
+            change |= {"second_place": np.nanmedian(fx[split:], axis=0).tolist(), "second_place_sigma_m": None}
         else:
-            moved_emissions, moved_kept = _rows(gone, rows[last + 1:], m)
-            emissions[last + 1:], kept[last + 1:] = moved_emissions[last + 1:], moved_kept[last + 1:]
-            places[last + 1:], own[last + 1:], held[last + 1:] = gone.position, gone.covariance, gone_extra
+            moved_emissions, moved_kept = _rows(gone, rows[split:], m)
+            emissions[split:], kept[split:] = moved_emissions[split:], moved_kept[split:]
+            places[split:], own[split:], held[split:] = gone.position, gone.covariance, gone_extra
             change |= {"second_place": gone.position.tolist(),
                        "second_place_sigma_m": float(np.sqrt(np.trace((gone.covariance + gone_extra)[:2, :2])))}
         change["distance_m"] = float(np.linalg.norm(np.asarray(change["second_place"])[:2] - pooled.position[:2]))
@@ -270,5 +306,5 @@ def survey_cross(still: dict[str, Any], k: int, survey: np.ndarray) -> np.ndarra
     return np.asarray(gains, float)[k, :2] @ np.asarray(survey, float)
 
 
-__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "still_tag",
-           "survey_cross", "survey_gains"]
+__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "split_ping",
+           "still_tag", "survey_cross", "survey_gains"]

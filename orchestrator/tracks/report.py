@@ -101,10 +101,12 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             say(f"sblsim: warning: the tag moved the whole time: its {v['trusted_fixes']} trusted single-ping fixes "
                 f"wander {beyond}; every row flagged (track it with --motion moving)", True)
         else:
-            say(f"sblsim: warning: the tag moved after ping {change['last_still_ping']}: from ping "
+            split = change.get("split_ping", change["last_still_ping"] + 1)
+            say(f"sblsim: warning: the tag moved after ping {split - 1} (its last still trusted fix at ping "
+                f"{change['last_still_ping']}, the pings between given to the place their arrivals fit): from ping "
                 f"{change['first_moved_ping']} on its fixes lie {change['distance_m']:.3g} m from its place, "
-                f"{beyond}; its {change['rows_moved']} rows from there flagged tag_moved and placed where it went, "
-                "the rows before it kept", True)
+                f"{beyond}; its {change['rows_moved']} rows from ping {split} flagged tag_moved and placed where it "
+                "went, the rows before it kept", True)
     quality = quality_line(s)
     say("  " + quality)
     for late in s["receivers_late"]:
