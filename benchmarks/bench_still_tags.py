@@ -9,7 +9,8 @@ A tag at a fixed place among 8 receivers (1 km × 0.8 km), a ping every 120 ± 2
 the pings): for ``--seeds`` still tags, the share of rows flagged and the mean 2-D NEES of the place against the
 truth with the covariance reported; the same tags' fixes under the permutation test of their order alone (the verdict
 before: :func:`sblsim.models.tracking.stationary.moved`); a tag moved 20 m at its 360th ping, where its rows are
-flagged from; a random walk of 2 m per ping (an animal); and the verdict's own time on 10⁴ fixes, still and moved
+flagged ``tag_moved`` from (None where none is); a random walk of 2 m per ping (an animal); and the verdict's own
+time on 10⁴ fixes, still and moved
 (best of three). Prints a JSON line last.
 
 The record varied the way real still tags' records differ: ``--interval`` the pings' interval [s] (uniform between
@@ -148,10 +149,11 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             outcome, places, _ = tracked(folder, seed, move=np.array([20.0, 0.0]), how=how)
             reasons = outcome.track["quality_reason"].str.contains("tag_moved").to_numpy()
             first = int(np.argmax(reasons)) if reasons.any() else len(reasons)
-            offsets.append(first - how.pings // 2)
+            offsets.append(first - how.pings // 2 if reasons.any() else None)  # None: no row flagged tag_moved
             before_ok.append(bool((outcome.track["quality"].to_numpy()[:first] == "ok").all()))
-            change = outcome.summary["motion"]["still"]["change"]
-            distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])))
+            change = outcome.summary["motion"]["still"]["change"]  # None: the move not found (NaN)
+            distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])) if change
+                            else float("nan"))
         animals = [tracked(folder, seed, walk=2.0, how=how)[0].summary["motion"]["still"]["verdict"]
                    for seed in range(5)]
     return {"record": str(how), "seeds": seeds, "rows": rows, "flagged": flagged, "share_flagged": flagged / rows,

@@ -14,8 +14,13 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import still as sv
-from sblsim.models.tracking.smoother_cost import ROBUST_DOF
 from sblsim.models.tracking.timing import SIGMA_TOA
+
+#: The fewest trusted single-ping fixes whose wander the verdict tests
+#: (:func:`~sblsim.models.tracking.still.still_verdict`: two segments of
+#: :data:`~sblsim.models.tracking.still.MIN_SEGMENT`): with fewer, whether the tag moved is unchecked, and said so
+#: (the verdict ``unchecked``), not called still.
+UNCHECKED_BELOW = 2 * sv.MIN_SEGMENT
 
 
 def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,
@@ -100,7 +105,7 @@ def receivers_term(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
 
 
 def split_ping(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarray, first: np.ndarray,
-               second: np.ndarray, dof: float = ROBUST_DOF) -> int:
+               second: np.ndarray, dof: float | None = None) -> int:
     """Where a still tag that moved once went from its first place to its second among the pings ``toa`` (k, n) [s]
     between its last still trusted fix and its first moved one (pings without a trusted fix: heard by too few
     receivers, or a fix the quality check set aside): the row ``s`` (0 ≤ s ≤ k) from which the pings' arrivals fit
@@ -109,7 +114,11 @@ def split_ping(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarr
     57(1), 1970). Each ping's cost at a place: its arrivals' ``(ν + 1) ln(1 + z² / ν)``, ``z`` the time of arrival
     less the range over ``c`` [m/s], less the ping's emission time (their mean weighed by ``1 / σ_i²``), over the
     receiver's ``sigma`` (n,) [s]. A ping heard by one receiver fits both places alike; of equal costs the earliest
-    split is taken (those rows flagged: no arrival says they stayed)."""
+    split is taken (those rows flagged: no arrival says they stayed). ``dof``: ν (None: the robust smoother's
+    :data:`~sblsim.models.tracking.smoother_cost.ROBUST_DOF`)."""
+    from sblsim.models.tracking.smoother_cost import ROBUST_DOF
+
+    dof = ROBUST_DOF if dof is None else dof
     toa = np.asarray(toa, float)
     heard = np.isfinite(toa)
     y = np.where(heard, toa, 0.0)
@@ -130,8 +139,9 @@ def split_ping(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarr
 class StillTag:
     """A still tag's rows (:func:`still_tag`): the ``pings`` (rows of the TOA matrix) with an emission, their
     ``emissions`` [s], each row's ``places`` (dim,) [m] and ``covariances`` (the pooled fit's own) and ``consider``
-    terms [m²], the arrivals each row kept (``heard``), the rows that ``moved`` (from the change on) and the
-    ``summary`` (``summary.json``'s ``motion``)."""
+    terms [m²], the arrivals each row kept (``heard``), the rows that ``moved`` (from the change on), whether its
+    motion is ``unchecked`` (fewer trusted fixes than the verdict tests: :data:`UNCHECKED_BELOW`) and the ``summary``
+    (``summary.json``'s ``motion``)."""
 
     pings: np.ndarray
     emissions: np.ndarray
@@ -140,6 +150,7 @@ class StillTag:
     consider: np.ndarray
     heard: np.ndarray
     moved: np.ndarray
+    unchecked: bool
     summary: dict[str, Any]
 
 
@@ -178,7 +189,9 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     the record (:data:`~sblsim.models.tracking.still.SPEED_WANDER`, or the calibration's stretches' spread where
     larger), and a reflection at each receiver as large as its timing noise as the fixes show it. A tag that moved
     keeps its first place on the rows before the change and its second place (where it went) on the rows after its
-    last still fix, those flagged; one that moved the whole time keeps one place, every row flagged (an animal).
+    last still fix, those flagged; one that moved the whole time keeps one place, every row flagged (an animal). With
+    fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved: ``unchecked`` (its rows are
+    flagged by the caller), not still.
 
     Parameters
     ----------
@@ -261,7 +274,9 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if change is not None:
         change["rows_moved"] = int(after[kp].sum())
     scale = verdict.white_scale if np.isfinite(verdict.white_scale) else 1.0
-    summary = {"verdict": "moving" if went and verdict.throughout else "moved" if went else "still",
+    unchecked = verdict.fixes < UNCHECKED_BELOW
+    said = "unchecked" if unchecked else "moving" if went and verdict.throughout else "moved" if went else "still"
+    summary = {"verdict": said,
                "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
                "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
@@ -269,7 +284,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "receivers_jackknife_m": spread, "change": change,
                "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),
                "survey_gains": gains.tolist()}
-    return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp],
+    return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp], unchecked,
                     {"still": summary, "moved": bool(went),
                      "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),
                                     "permutations": PERMUTATIONS, "in_order": bool(ordered)}})
@@ -306,5 +321,5 @@ def survey_cross(still: dict[str, Any], k: int, survey: np.ndarray) -> np.ndarra
     return np.asarray(gains, float)[k, :2] @ np.asarray(survey, float)
 
 
-__all__ = ["StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track", "split_ping",
-           "still_tag", "survey_cross", "survey_gains"]
+__all__ = ["UNCHECKED_BELOW", "StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track",
+           "split_ping", "still_tag", "survey_cross", "survey_gains"]

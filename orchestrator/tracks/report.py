@@ -92,6 +92,10 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "
             "the speed at its nearer end", True)
     m = s["motion"]
+    if (m.get("still") or {}).get("verdict") == "unchecked":
+        say(f"sblsim: warning: whether the tag moved is unchecked: {m['still']['trusted_fixes']} trusted single-ping "
+            "fixes, too few to test their wander; its place takes it as still, every row flagged motion_unchecked",
+            True)
     if m.get("moved"):
         v, change = m["still"], m["still"]["change"]
         beyond = (f"beyond what its error terms let its fixes wander (step statistic {v['step_statistic']:.3g} over "

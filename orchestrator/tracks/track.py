@@ -290,11 +290,14 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         motion_info |= still.summary | {"consider_terms": [term for term, known in (
             ("survey", survey is not None), ("sound speed", bool(speed_sigma)),
             ("clocks", clock_sigma is not None and bool(np.nan_to_num(clock_sigma).any()))) if known]}
-        if still.moved.any():  # a place refuted by the tag's own fixes: no row after the change is a place to take
-            frame = frames["stationary"]
-            frame.loc[still.moved, "quality"] = "flagged"
-            frame.loc[still.moved, "quality_reason"] = _with_reason(frame["quality_reason"][still.moved], "tag_moved")
-            flagged["stationary"] = int((frame["quality"] == "flagged").sum())
+        # a place refuted by the tag's own fixes (no row after the change is a place to take), or one nothing checks
+        for marked, reason in ((still.moved, "tag_moved"), (np.full(len(still.moved), still.unchecked),
+                                                            "motion_unchecked")):
+            if marked.any():
+                frame = frames["stationary"]
+                frame.loc[marked, "quality"] = "flagged"
+                frame.loc[marked, "quality_reason"] = _with_reason(frame["quality_reason"][marked], reason)
+                flagged["stationary"] = int((frame["quality"] == "flagged").sum())
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)

@@ -107,6 +107,30 @@ def test_on_five_receivers_the_pings_between_two_trusted_fixes_are_placed_by_the
     assert max(gaps) > 3, gaps  # the records this checks: a gap of untrusted pings the split closed
 
 
+def test_a_still_tag_whose_fixes_cannot_be_trusted_is_unchecked_not_still(tmp_path, capsys):
+    """Three receivers: each ping's fix is exact whatever its arrivals (none to spare), so none is trusted and the
+    verdict cannot test the fixes' wander: ``unchecked`` (not ``still``), every row flagged ``motion_unchecked``,
+    one warning line; the place is still given. Four receivers hear enough for the verdict: ``still``."""
+    from sblsim.orchestrator.cli import main
+
+    toa, receivers, places = _record(tmp_path, 2, n=200, receivers=3)
+    out = tmp_path / "out"
+    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
+                 "--toa-sigma", str(SIGMA), "--sound-speed", "1480", "--out", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "whether the tag moved is unchecked" in line]
+    still = json.loads((out / "summary.json").read_text())["motion"]["still"]
+    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert still["verdict"] == "unchecked" and still["trusted_fixes"] < 10, still
+    assert len(rows) > 150 and (rows["quality"] == "flagged").all()
+    assert (np.char.find(rows["quality_reason"].astype(str), "motion_unchecked") >= 0).all()
+    assert len(said) == 1 and f"{still['trusted_fixes']} trusted single-ping fixes" in said[0], said
+    assert np.linalg.norm(np.asarray(still["place"]) - places[0]) < 1.0
+    toa, receivers, _ = _record(tmp_path, 2, n=200, receivers=4)
+    outcome = track(toa, receivers, motion="stationary", toa_sigma=SIGMA, other_filters=False, sound_speed=1480.0)
+    assert outcome.summary["motion"]["still"]["verdict"] == "still"
+    assert not outcome.track["quality_reason"].fillna("").str.contains("motion_unchecked").any()
+
+
 def test_an_animal_tracked_as_still_is_moving(tmp_path):
     """A random walk of 2 m per ping tracked as a still tag: moving the whole time, every row flagged
     ``tag_moved``."""
