@@ -1,7 +1,7 @@
 """Still tags: the verdict "moved beyond what its error terms allow" and the σ of its place, on simulated records.
 
 Run:  python benchmarks/bench_still_tags.py [--seeds N] [--interval LO HI] [--pings N] [--receivers K]
-                                             [--reflection SHARE]
+                                             [--reflection SHARE] [--site open|canal]
 
 A tag at a fixed place among 8 receivers (1 km × 0.8 km), a ping every 120 ± 24 s over a day, each receiver hearing
 80 % with 0.1 ms noise, in water whose sound speed is 1,480 ± 5 m/s over the day (a sine of random phase), tracked as
@@ -17,7 +17,9 @@ The record varied the way real still tags' records differ: ``--interval`` the pi
 the two: a sync tag's 540 660), ``--pings`` their count (a season's), ``--receivers`` the first K receivers alone (4
 to 8: an array that lost some), ``--reflection`` the share of the record [0, 1) in which receiver H2 hears a
 reflection in place of the direct path (a path longer by 8 to 15 m, in episodes of 2 to 12 hours: a reflection
-that comes and goes with the water level).
+that comes and goes with the water level), ``--site canal`` another site: K receivers spread evenly along a bent
+canal (two legs of 500 m at a right angle, on alternate banks 10 m apart: :func:`canal`), the tag on its second leg
+180 m from the bend, moved 20 m along the canal.
 """
 
 from __future__ import annotations
@@ -34,23 +36,42 @@ import numpy as np
 RECEIVERS = np.array([[0.0, 0.0], [1000.0, 0.0], [1000.0, 800.0], [0.0, 800.0], [500.0, 400.0], [250.0, 700.0],
                       [800.0, 150.0], [650.0, 750.0]])
 TAG = np.array([780.0, 560.0])
+#: The bent canal's tag: on its second leg, 180 m from the bend; moved along the canal.
+CANAL_TAG = np.array([503.0, 180.0])
 SIGMA = 1e-4
 PINGS = 720
+SITES = ("open", "canal")
+
+
+def canal(k: int) -> np.ndarray:
+    """K receivers (k, 2) [m] spread evenly along a bent canal: two legs of 500 m at a right angle (east, then north
+    from the bend at (500, 0)), on alternate banks 10 m apart."""
+    along = np.linspace(0.0, 1000.0, k)
+    bank = 5.0 * (-1.0) ** np.arange(k)
+    return np.where((along <= 500.0)[:, None], np.column_stack([along, bank]),
+                    np.column_stack([500.0 + bank, along - 500.0]))
 
 
 @dataclass(frozen=True)
 class Record:
     """How a simulated record is made (the module docstring): the pings' interval [s], their count, the receivers
-    used, and the share of the record a reflection replaces H2's direct path."""
+    used, the share of the record a reflection replaces H2's direct path, and the site (:data:`SITES`)."""
 
     interval: tuple[float, float] = (96.0, 144.0)
     pings: int = PINGS
     receivers: int = len(RECEIVERS)
     reflection: float = 0.0
+    site: str = "open"
+
+    def layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The receivers (K, 2) [m], the tag's place (2,) [m] and the move of a moved tag (2,) [m]."""
+        if self.site == "canal":
+            return canal(self.receivers), CANAL_TAG, np.array([0.0, 20.0])
+        return RECEIVERS[:self.receivers], TAG, np.array([20.0, 0.0])
 
     def __str__(self) -> str:
         said = f"a ping every {self.interval[0]:g}-{self.interval[1]:g} s, {self.pings} pings"
-        said += f", {self.receivers} receivers"
+        said += f", {self.receivers} receivers" + (" along a bent canal" if self.site == "canal" else "")
         return said + (f", a reflection at H2 {100 * self.reflection:g} % of the time" if self.reflection else "")
 
 
@@ -81,10 +102,10 @@ def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float 
 
     rng = np.random.default_rng(seed)
     n = how.pings
-    receivers = RECEIVERS[:how.receivers]
+    receivers, tag, _ = how.layout()
     t = np.cumsum(rng.uniform(*how.interval, n))
     c = 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 2 * np.pi))
-    places = np.repeat(TAG[None], n, axis=0)
+    places = np.repeat(tag[None], n, axis=0)
     if move is not None:
         places[n // 2:] += move
     if walk is not None:
@@ -146,7 +167,7 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             seconds.append(took)
         offsets, before_ok, distance = [], [], []
         for seed in range(5):
-            outcome, places, _ = tracked(folder, seed, move=np.array([20.0, 0.0]), how=how)
+            outcome, places, _ = tracked(folder, seed, move=how.layout()[2], how=how)
             reasons = outcome.track["quality_reason"].str.contains("tag_moved").to_numpy()
             first = int(np.argmax(reasons)) if reasons.any() else len(reasons)
             offsets.append(first - how.pings // 2 if reasons.any() else None)  # None: no row flagged tag_moved
@@ -172,6 +193,8 @@ def main() -> None:
     parser.add_argument("--pings", type=int, default=PINGS, help=f"pings a record (default {PINGS})")
     parser.add_argument("--receivers", type=int, default=len(RECEIVERS),
                         help=f"the first K receivers alone (4 to {len(RECEIVERS)})")
+    parser.add_argument("--site", choices=SITES, default="open",
+                        help="open: 8 receivers over 1 km x 0.8 km; canal: K receivers along a bent canal")
     parser.add_argument("--reflection", type=float, default=0.0,
                         help="the share of the record a reflection replaces H2's direct path [0, 1)")
     args = parser.parse_args()
@@ -185,7 +208,7 @@ def main() -> None:
         parser.error(f"--receivers: {args.receivers}; allowed: 4 to {len(RECEIVERS)}")
     if not 0 <= args.reflection < 1:
         parser.error(f"--reflection: {args.reflection:g}; allowed: 0 <= SHARE < 1")
-    how = Record(tuple(args.interval), args.pings, args.receivers, args.reflection)
+    how = Record(tuple(args.interval), args.pings, args.receivers, args.reflection, args.site)
     r = measure(args.seeds, how)
     print(f"records: {how}")
     print(f"{r['seeds']} still tags in water of 1480 ± 5 m/s (a sine of a day): {r['flagged']} of {r['rows']} rows "

@@ -62,10 +62,29 @@ def test_no_reflection_draws_nothing_and_the_default_is_the_whole_array(tmp_path
     assert times.shape == (bench.PINGS, len(bench.RECEIVERS)) and len(table) == len(bench.RECEIVERS)
 
 
+def test_the_canal_site_spreads_its_receivers_along_two_legs_and_moves_the_tag_along_it(tmp_path):
+    """``--site canal``: six receivers 200 m apart along the canal's path (its two 500 m legs at a right angle),
+    alternate banks 10 m apart; the record's receivers file holds them, and a moved tag's second place is 20 m
+    north (along the second leg), its first on that leg."""
+    receivers = bench.canal(6)
+    on_first = np.abs(receivers[:, 1]) <= 5.0  # the first leg along y = 0, the second along x = 500
+    along = np.where(on_first, receivers[:, 0], 500.0 + receivers[:, 1])
+    np.testing.assert_allclose(along, np.arange(6) * 200.0, atol=1e-9)
+    first, second = receivers[on_first], receivers[~on_first]
+    assert np.allclose(np.abs(first[:, 1]), 5.0) and np.allclose(np.abs(second[:, 0] - 500.0), 5.0)
+    how = bench.Record(pings=100, receivers=6, site="canal")
+    toa, table_path, places = bench.record(tmp_path, 1, move=how.layout()[2], how=how)
+    _, table = _read(toa, table_path)
+    assert np.allclose(table[["x_m", "y_m"]].to_numpy(), receivers)
+    assert np.allclose(places[0], bench.CANAL_TAG) and np.allclose(places[-1] - places[0], [0.0, 20.0])
+    assert abs(places[0][0] - 500.0) < 5.0
+
+
 @pytest.mark.parametrize("args, message", [(["--receivers", "3"], "--receivers: 3; allowed: 4 to 8"),
                                            (["--reflection", "1"], "--reflection: 1; allowed: 0 <= SHARE < 1"),
                                            (["--interval", "60", "30"], "--interval: 60 30; allowed: 0 < LO <= HI"),
-                                           (["--pings", "10"], "--pings: 10; allowed: 40 or more")])
+                                           (["--pings", "10"], "--pings: 10; allowed: 40 or more"),
+                                           (["--site", "lake"], "--site: invalid choice: 'lake'")])
 def test_a_bad_argument_is_one_line_and_exit_2(args, message):
     run = subprocess.run([sys.executable, str(BENCHMARKS / "bench_still_tags.py"), *args], capture_output=True,
                          text=True, timeout=120)
