@@ -188,10 +188,11 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     show is none). The slow errors: each receiver's clock offset's ``clock_sigma`` [s], the sound speed's change over
     the record (:data:`~sblsim.models.tracking.still.SPEED_WANDER`, or the calibration's stretches' spread where
     larger), and a reflection at each receiver as large as its timing noise as the fixes show it. A tag that moved
-    keeps its first place on the rows before the change and its second place (where it went) on the rows after its
-    last still fix, those flagged; one that moved the whole time keeps one place, every row flagged (an animal). With
-    fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved: ``unchecked`` (its rows are
-    flagged by the caller), not still.
+    keeps its first place on the rows before the change and its second place (where it went) on the rows from the
+    split (the pings between its last still trusted fix and its first moved one given to the place their arrivals
+    fit: :func:`split_ping`), those flagged; one that moved the whole time keeps one place, every row flagged (an
+    animal). With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved: ``unchecked`` (its
+    rows are flagged by the caller), not still.
 
     Parameters
     ----------
@@ -246,12 +247,13 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
         before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
         split = last + 1
-        try:  # the rows between the two trusted fixes: each side's place from its own side's rows
-            gone = _place(toa, positions, c, fx, rows[first:], sigma_toa, survey, speed_sigma, clock_sigma)[0]
-        except ModelError:
-            gone = None
-        if gone is not None and first > last + 1:
-            split = split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone.position) + last + 1
+        if first > last + 1:  # the rows between the two trusted fixes: each side's place from its own side's rows
+            try:
+                gone = stationary_track(toa[first:], positions, c, fx[first:], sigma_toa).position
+            except ModelError:  # too few receivers heard it after: the rows between flagged
+                gone = None
+            if gone is not None:
+                split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone)
         after[split:] = True
         pooled, extra, spread, gains = before if split == last + 1 else _place(
             toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
