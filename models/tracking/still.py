@@ -44,7 +44,7 @@ Units: metres [m], seconds [s].
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -88,7 +88,9 @@ class StillVerdict:
     the tested fixes ``order`` (indices into the fixes given), and ``change``: the position in ``order`` of the first
     fix after the first change (None: the tag stayed). ``throughout``: the tag moved the whole time (fewer than
     :data:`MIN_STILL` fixes before the change, or those in an order in time its error terms do not make:
-    :func:`wanders`)."""
+    :func:`wanders`). ``detectable`` (2,) [m]: the smallest step a single fix could see, in the best and the worst
+    direction (the square roots of χ²(2) at :data:`STEP_LEVEL` times the eigenvalues of a fix's own and slow
+    covariance; NaN where undecided): a smaller move is not told from the fixes' scatter."""
 
     fixes: int
     white_scale: float
@@ -97,6 +99,7 @@ class StillVerdict:
     order: np.ndarray
     change: int | None
     throughout: bool = False
+    detectable: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
 
 
 def white_scale(x: np.ndarray, R: np.ndarray) -> float:
@@ -265,12 +268,14 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
     C = np.asarray(slow, float) + (0.0 if multipath is None else s2 * np.asarray(multipath, float))
     G = slow_columns(t, C, time_scale)
     # a step a single fix could see: beyond χ²(2) at STEP_LEVEL of a fix's own and slow covariance
+    seen_at = -2.0 * np.log(1.0 - STEP_LEVEL)
     spread = np.linalg.inv(np.median(Rw, axis=0) + C)
+    detectable = np.sqrt(seen_at * np.clip(np.linalg.eigvalsh(np.median(Rw, axis=0) + C), 0.0, None))
     first, bound, change, end = np.nan, np.nan, None, len(k)
     while end >= 2 * MIN_SEGMENT:
         stats, steps = step_statistics(x[:end], Rw[:end], G[..., :end])
         stats, steps = stats[MIN_SEGMENT:end - MIN_SEGMENT + 1], steps[MIN_SEGMENT:end - MIN_SEGMENT + 1]
-        seen = np.einsum("ka,ab,kb->k", steps, spread, steps) > -2.0 * np.log(1.0 - STEP_LEVEL)
+        seen = np.einsum("ka,ab,kb->k", steps, spread, steps) > seen_at
         limit = threshold(len(stats), level)
         candidates = np.where(seen & (stats > limit), stats, -np.inf)
         if change is None:
@@ -279,7 +284,7 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
             break
         change = end = MIN_SEGMENT + int(np.argmax(candidates))
     throughout = change is not None and (change < MIN_STILL or wanders(x[:change], Rw[:change], G[..., :change]))
-    return StillVerdict(len(k), s2, first, bound, k, change, throughout)
+    return StillVerdict(len(k), s2, first, bound, k, change, throughout, detectable)
 
 
 def order_ratio(x: np.ndarray) -> np.ndarray:

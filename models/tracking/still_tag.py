@@ -282,6 +282,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
                "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
+               "detectable_step_m": [_number(x) for x in verdict.detectable],
                "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
                "receivers_jackknife_m": spread, "change": change,
                "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),

@@ -147,6 +147,31 @@ def test_a_tag_moved_20_m_half_way_is_found_at_its_move():
         assert not verdict.throughout and verdict.statistic > verdict.threshold
 
 
+def test_the_detectable_step_is_the_smallest_move_the_verdict_finds():
+    """Fixes of 0.2 m of white noise and no slow error, 600 a minute apart: the detectable step is √(χ²(2, 0.99)) σ
+    in both directions (the dispersion near 1), a move of 1.5 times it half way is found at its fix, one of half of it
+    is not, though its step statistic is far above the threshold (300 fixes a side see it together; a single fix
+    does not)."""
+    rng = np.random.default_rng(3)
+    n, sigma = 600, 0.2
+    R = np.tile(sigma**2 * np.eye(2), (n, 1, 1))
+    t = np.arange(n) * 60.0
+    noise = sigma * rng.standard_normal((n, 2))
+    base = sv.still_verdict(noise, R, t, np.ones(n, bool), 1e-12 * np.eye(2))
+    expected = np.sqrt(-2.0 * np.log(1.0 - sv.STEP_LEVEL) * base.white_scale) * sigma
+    np.testing.assert_allclose(base.detectable, [expected, expected], rtol=1e-6)
+    assert 0.8 < base.white_scale < 1.25 and base.change is None
+    for factor, found in ((1.5, True), (0.5, False)):
+        x = noise.copy()
+        x[n // 2:, 0] += factor * base.detectable[1]
+        verdict = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-12 * np.eye(2))
+        assert (verdict.change is not None) == found, (factor, verdict)
+        if found:
+            assert verdict.order[verdict.change] == n // 2
+        else:
+            assert verdict.statistic > 3 * verdict.threshold
+
+
 def test_an_animal_moves_the_whole_time():
     """A random walk of 2 m per ping: moved the whole time (3 seeds)."""
     for seed in range(3):
