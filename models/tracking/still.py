@@ -269,8 +269,9 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
     G = slow_columns(t, C, time_scale)
     # a step a single fix could see: beyond χ²(2) at STEP_LEVEL of a fix's own and slow covariance
     seen_at = -2.0 * np.log(1.0 - STEP_LEVEL)
-    spread = np.linalg.inv(np.median(Rw, axis=0) + C)
-    detectable = np.sqrt(seen_at * np.clip(np.linalg.eigvalsh(np.median(Rw, axis=0) + C), 0.0, None))
+    single = np.median(Rw, axis=0) + C  # a fix's own and slow covariance
+    spread = np.linalg.inv(single)
+    detectable = np.sqrt(seen_at * np.clip(np.linalg.eigvalsh(single), 0.0, None))
     first, bound, change, end = np.nan, np.nan, None, len(k)
     while end >= 2 * MIN_SEGMENT:
         stats, steps = step_statistics(x[:end], Rw[:end], G[..., :end])

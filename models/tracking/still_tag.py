@@ -117,17 +117,16 @@ def split_ping(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarr
     split is taken (those rows flagged: no arrival says they stayed). ``dof``: ν (None: the robust smoother's
     :data:`~sblsim.models.tracking.smoother_cost.ROBUST_DOF`)."""
     from sblsim.models.tracking.smoother_cost import ROBUST_DOF
+    from sblsim.models.tracking.stationary import _centred, _geometry
 
     dof = ROBUST_DOF if dof is None else dof
     toa = np.asarray(toa, float)
     heard = np.isfinite(toa)
     y = np.where(heard, toa, 0.0)
     w = np.where(heard, 1.0 / sigma**2, 0.0)
-    total = np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
 
     def cost(place: np.ndarray) -> np.ndarray:  # (k,)
-        emitted = y - np.linalg.norm(place[None, :] - positions, axis=1)[None, :] / c
-        z = (emitted - (w * emitted).sum(axis=1, keepdims=True) / total) / sigma
+        z = np.where(heard, _centred(_geometry(y, positions, c, place)[1], w), 0.0) / sigma
         return np.where(heard, (dof + 1.0) * np.log1p(z**2 / dof), 0.0).sum(axis=1)
 
     at_first, at_second = cost(np.asarray(first, float)), cost(np.asarray(second, float))
