@@ -36,9 +36,29 @@ def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np
     """
     from sblsim.models.tracking.stationary import stationary_fix
 
+    return stationary_fix(toa, positions, c, sigma_toa, _start(positions, fixes))
+
+
+def changing_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,
+                   sigma_toa: float | np.ndarray = SIGMA_TOA):
+    """A still tag's pooled fix with the sound speed's change over its record fitted beside it
+    (:func:`~sblsim.models.tracking.speed_change.speed_change_fix`), from the same start as
+    :func:`stationary_track`.
+
+    Raises
+    ------
+    ModelError
+        Too few receivers heard it (one line).
+    """
+    from sblsim.models.tracking.speed_change import speed_change_fix
+
+    return speed_change_fix(toa, positions, c, sigma_toa, _start(positions, fixes))
+
+
+def _start(positions: np.ndarray, fixes: np.ndarray) -> np.ndarray:
+    """A pooled fit's start: the median of the single-ping fixes (m, dim) [m], else the receivers' centroid."""
     finite = np.isfinite(fixes).all(axis=1)
-    start = np.median(fixes[finite], axis=0) if finite.any() else positions.mean(axis=0)
-    return stationary_fix(toa, positions, c, sigma_toa, start)
+    return np.median(fixes[finite], axis=0) if finite.any() else positions.mean(axis=0)
 
 
 def stationary_consider(toa: np.ndarray, positions: np.ndarray, c: float, pooled, survey: np.ndarray | None,
@@ -154,17 +174,23 @@ class StillTag:
 
 
 def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
-    """One place of a still tag from the pings ``rows``: its pooled fit, the consider terms and the receivers' term
-    summed (dim, dim) [m²], the receivers' term's DRMS [m] and the survey's gains (:func:`survey_gains`), the
-    consider terms and the gains from one bias sensitivity."""
+    """One place of a still tag from the pings ``rows``: its pooled fit (the sound speed's change fitted beside it:
+    :func:`changing_track`), the consider terms and the receivers' term summed (dim, dim) [m²], the receivers'
+    term's DRMS [m], the survey's gains (:func:`survey_gains`) and the speed's change fitted [m/s] (its least and
+    largest); the consider terms and the gains from one bias sensitivity, all on the times of arrival less the
+    speed's change."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
-    pooled = stationary_track(toa[rows], positions, c, fixes[rows], sigma_toa)
-    S = bias_sensitivity(toa[rows], positions, c, sigma_toa, pooled)
-    held = stationary_consider(toa[rows], positions, c, pooled, survey, speed_sigma, sigma_toa, clock_sigma, S)
-    spread = receivers_term(toa[rows], positions, c, pooled, sigma_toa)
-    gains = survey_gains(toa[rows], positions, c, pooled, sigma_toa, S)
-    return pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains
+    fitted = changing_track(toa[rows], positions, c, fixes[rows], sigma_toa)
+    pooled, y = fitted.fix, fitted.corrected
+    S = bias_sensitivity(y, positions, c, sigma_toa, pooled)
+    # the speed fitted (its mean too): its error is in the fit's covariance, no consider term
+    held = stationary_consider(y, positions, c, pooled, survey, None if fitted.knots else speed_sigma, sigma_toa,
+                               clock_sigma, S)
+    spread = receivers_term(y, positions, c, pooled, sigma_toa)
+    gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
+    return (pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
+            fitted.speed_range(c))
 
 
 def _rows(fit, rows: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -228,7 +254,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
     rows = np.arange(m)
-    pooled, extra, spread, gains = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma, clock_sigma)
+    pooled, extra, spread, gains, changed = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma,
+                                                   clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
     slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
@@ -254,14 +281,14 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
             if gone is not None:
                 split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone)
         after[split:] = True
-        pooled, extra, spread, gains = before if split == last + 1 else _place(
+        pooled, extra, spread, gains, changed = before if split == last + 1 else _place(
             toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)
         places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
         change["split_ping"] = split
         try:  # where it went: the pooled fit of the rows from the split
-            gone, gone_extra, _, _ = _place(toa, positions, c, fx, rows[split:], sigma_toa, survey, speed_sigma,
-                                         clock_sigma)
+            gone, gone_extra = _place(toa, positions, c, fx, rows[split:], sigma_toa, survey, speed_sigma,
+                                      clock_sigma)[:2]
         except ModelError:  # too few receivers heard it there: its fixes' median
             change |= {"second_place": np.nanmedian(fx[split:], axis=0).tolist(), "second_place_sigma_m": None}
         else:
@@ -283,7 +310,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
                "detectable_step_m": [_number(x) for x in verdict.detectable],
                "slow_sigma_m": np.sqrt(np.clip(np.linalg.eigvalsh(slow + scale * multipath), 0.0, None))[::-1].tolist(),
-               "receivers_jackknife_m": spread, "change": change,
+               "receivers_jackknife_m": spread, "speed_change_m_s": changed, "change": change,
                "place": pooled.position.tolist(), "covariance": (pooled.covariance + extra).tolist(),
                "survey_gains": gains.tolist()}
     return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp], unchecked,
@@ -323,5 +350,5 @@ def survey_cross(still: dict[str, Any], k: int, survey: np.ndarray) -> np.ndarra
     return np.asarray(gains, float)[k, :2] @ np.asarray(survey, float)
 
 
-__all__ = ["UNCHECKED_BELOW", "StillTag", "place_score", "receivers_term", "stationary_consider", "stationary_track",
-           "split_ping", "still_tag", "survey_cross", "survey_gains"]
+__all__ = ["UNCHECKED_BELOW", "StillTag", "changing_track", "place_score", "receivers_term", "stationary_consider",
+           "stationary_track", "split_ping", "still_tag", "survey_cross", "survey_gains"]
