@@ -32,6 +32,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_array, diags_array
+from scipy.sparse.linalg import splu
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
@@ -63,20 +65,17 @@ class SpeedChangeFix:
         return [float(dc.min()), float(dc.max())]
 
 
-def _basis(times: np.ndarray, spacing: float) -> np.ndarray:
-    """The knots' hat functions at ``times`` (m,) [s]: (m, K), K knots ``spacing`` [s] apart over the times' span
-    (NaN times: a zero row)."""
+def _basis(times: np.ndarray, spacing: float):
+    """The knots' hat functions at ``times`` (m,) [s]: a sparse (m, K) matrix (``scipy.sparse.csr_array``), K knots
+    ``spacing`` [s] apart over the times' span, two hats at each finite time (NaN times: a zero row)."""
     finite = np.isfinite(times)
     t0, t1 = float(times[finite].min()), float(times[finite].max())
     K = max(2, int(np.ceil((t1 - t0) / spacing)) + 1)
-    u = np.where(finite, (times - t0) / spacing, 0.0).clip(0.0, K - 1 - 1e-12)
+    rows = np.flatnonzero(finite)
+    u = ((times[rows] - t0) / spacing).clip(0.0, K - 1 - 1e-12)
     j = np.floor(u).astype(int)
     frac = u - j
-    B = np.zeros((len(times), K))
-    rows = np.flatnonzero(finite)
-    B[rows, j[rows]] = 1.0 - frac[rows]
-    B[rows, j[rows] + 1] = frac[rows]
-    return B
+    return csr_array((np.r_[1.0 - frac, frac], (np.r_[rows, rows], np.r_[j, j + 1])), shape=(len(times), K))
 
 
 def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
@@ -134,7 +133,7 @@ def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     y = np.where(heard, toa, 0.0)
     B = _basis(times, spacing)
     K = B.shape[1]
-    prior = (c / wander) ** 2 * np.eye(K)  # W⁻², W = wander / c
+    prior = (c / wander) ** 2  # W⁻², W = wander / c, each knot's
     a = np.zeros(K)
     w = heard.astype(float)
 
@@ -159,28 +158,29 @@ def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
         g = np.where(heard, _centred(np.broadcast_to(-rho / c, heard.shape), wp), 0.0) / sigma
         return r, w, Jp, g, emitted, rho
 
-    def normal(weight: np.ndarray, Jp: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """The normal matrix of (p, a) (dim + K, dim + K) at the arrivals' weights, the knots' prior with it."""
+    def blocks(weight: np.ndarray, Jp: np.ndarray, g: np.ndarray):
+        """The normal matrix of (p, a) at the arrivals' weights, the knots' prior with it, in blocks: the place's
+        (dim, dim), the place's with the knots' (dim, K), and the knots' LU (tridiagonal: each ping on two knots)."""
         Npp = np.einsum("mn,mni,mnj->ij", weight, Jp, Jp)
-        Npa = np.einsum("mn,mni,mn->mi", weight, Jp, g).T @ B
-        Naa = (B * (weight * g**2).sum(axis=1)[:, None]).T @ B + prior
-        return np.block([[Npp, Npa], [Npa.T, Naa]])
+        Npa = (B.T @ np.einsum("mn,mni,mn->mi", weight, Jp, g)).T
+        Naa = B.T @ diags_array((weight * g**2).sum(axis=1)) @ B + prior * diags_array(np.ones(K))
+        return Npp, Npa, splu(Naa.tocsc())
 
     iterations = 0
     while iterations < ITERATIONS:
         iterations += 1
         r, w, Jp, g = terms(p, a, w)[:4]
-        gradient = np.concatenate([np.einsum("mn,mni,mn->i", w, Jp, r),
-                                   B.T @ (w * g * r).sum(axis=1) + prior @ a])
-        step = np.linalg.lstsq(normal(w, Jp, g), -gradient, rcond=None)[0]
-        p = p + step[:dim]
-        a = a + step[dim:]
-        if np.abs(step[:dim]).max() < TOLERANCE and np.abs(c * step[dim:]).max() < 1e-3:
+        Npp, Npa, lu = blocks(w, Jp, g)
+        gp, ga = np.einsum("mn,mni,mn->i", w, Jp, r), B.T @ (w * g * r).sum(axis=1) + prior * a
+        X = lu.solve(np.column_stack([Npa.T, ga]))  # Naa⁻¹ [Nap, ga]: the knots eliminated (Schur complement)
+        dp = np.linalg.lstsq(Npp - Npa @ X[:, :dim], Npa @ X[:, dim] - gp, rcond=None)[0]
+        da = -X[:, dim] - X[:, :dim] @ dp
+        p, a = p + dp, a + da
+        if np.abs(dp).max() < TOLERANCE and np.abs(c * da).max() < 1e-3:
             break
     r, w, Jp, g, emitted, rho = terms(p, a, w)
-    info = np.where(heard, observed_information(r, dof), 0.0)
-    joint = np.linalg.pinv(normal(info, Jp, g))
-    covariance = joint[:dim, :dim]
+    Npp, Npa, lu = blocks(np.where(heard, observed_information(r, dof), 0.0), Jp, g)
+    covariance = np.linalg.pinv(Npp - Npa @ lu.solve(np.ascontiguousarray(Npa.T)))  # the place's block of the inverse
     wp = w / sigma**2
     total = wp.sum(axis=1)
     emissions = np.where(total > 0, (wp * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)

@@ -189,8 +189,17 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
                                clock_sigma, S)
     spread = receivers_term(y, positions, c, pooled, sigma_toa)
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
-    return (pooled, spread + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
+    beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
+    return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
             fitted.speed_range(c))
+
+
+def _beyond(spread: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """The receivers' jackknife ``spread`` (dim, dim) [m²] beyond a fit's ``own`` covariance: the positive part of
+    their difference (its eigenvalues below 0 set to 0), so that ``own`` plus it is at least each of the two in every
+    direction. Each refit without a receiver moves by the arrivals' own noise too, which ``own`` already holds."""
+    values, vectors = np.linalg.eigh(spread - own)
+    return (vectors * values.clip(0.0, None)) @ vectors.T
 
 
 def _rows(fit, rows: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:

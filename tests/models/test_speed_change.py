@@ -55,7 +55,7 @@ def test_the_fit_is_least_squares_on_the_model_written_out():
     fitted = speed_change_fix(toa, RECEIVERS, c, SIGMA, TAG + 2.0, dof=dof)
     heard = np.isfinite(toa)
     times = np.nanmin(toa, axis=1)
-    B = _basis(times, 3600.0)
+    B = _basis(times, 3600.0).toarray()
     K = B.shape[1]
 
     def residuals(x: np.ndarray) -> np.ndarray:
