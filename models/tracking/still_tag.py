@@ -1,8 +1,10 @@
 """A still tag (``motion`` ``stationary``; a reference tag; a sync tag left out of the synchronisation): one position
 for all its pings, pooled from its arrivals
-(:mod:`sblsim.models.tracking.stationary`), the consider covariance of the errors pooling does not average (the
-receivers' survey, the sound speed, the receivers' clock offsets, and what the receivers' jackknife shows), and the
-verdict of whether, and from when, it moved (:mod:`sblsim.models.tracking.still`).
+(:mod:`sblsim.models.tracking.stationary`) with the sound speed's change over its record fitted beside it
+(:mod:`sblsim.models.tracking.speed_change`), the consider covariance of the errors pooling does not average (the
+receivers' survey, the receivers' clock offsets, the sound speed's where its change is not fitted, and what the
+receivers' jackknife shows beyond the fit's own covariance), and the verdict of whether, and from when, it moved
+(:mod:`sblsim.models.tracking.still`).
 """
 
 from __future__ import annotations
@@ -114,11 +116,10 @@ def survey_gains(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
 def receivers_term(toa: np.ndarray, positions: np.ndarray, c: float, pooled,
                    sigma_toa: float | np.ndarray) -> np.ndarray:
     """What the receivers' errors did to the pooled position (dim, dim) [m²]: the receivers' jackknife
-    (:func:`~sblsim.models.tracking.stationary.receiver_jackknife`), added whole to the pooled fit's covariance and
-    the consider terms. It sees what they cannot: a reflection on one receiver's path, a clock or a survey worse than
-    stated, the speed's change between pings weighing on each ping's receivers differently; added rather than merged
-    (a jackknife of 6 to 20 receivers falls short of its variance as often as not, and its share of the arrivals' own
-    noise is small beside the terms it adds to)."""
+    (:func:`~sblsim.models.tracking.stationary.receiver_jackknife`), added to the pooled fit's covariance and the
+    consider terms where it exceeds the fit's own covariance (:func:`_place`). It sees what they cannot: a reflection
+    on one receiver's path, a clock or a survey worse than stated; added rather than merged with the consider terms
+    (a jackknife of 6 to 20 receivers falls short of its variance as often as not)."""
     from sblsim.models.tracking.stationary import receiver_jackknife
 
     return receiver_jackknife(toa, positions, c, sigma_toa, pooled)[1]
@@ -177,8 +178,8 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     """One place of a still tag from the pings ``rows``: its pooled fit (the sound speed's change fitted beside it:
     :func:`changing_track`), the consider terms and the receivers' term summed (dim, dim) [m²], the receivers'
     term's DRMS [m], the survey's gains (:func:`survey_gains`) and the speed's change fitted [m/s] (its least and
-    largest); the consider terms and the gains from one bias sensitivity, all on the times of arrival less the
-    speed's change."""
+    largest; None where the record is too short to fit it); the consider terms and the gains from one bias
+    sensitivity, all on the times of arrival less the speed's change."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     fitted = changing_track(toa[rows], positions, c, fixes[rows], sigma_toa)
@@ -191,7 +192,7 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
     beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
     return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
-            fitted.speed_range(c))
+            fitted.speed_range(c) if fitted.knots else None)
 
 
 def _beyond(spread: np.ndarray, own: np.ndarray) -> np.ndarray:

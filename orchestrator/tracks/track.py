@@ -287,8 +287,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         still = still_tag(toa, positions, c, (fx, fe, fc, fused), trusted, sigma, survey, speed, clock_sigma)
         rows("stationary", still.pings, still.emissions, still.places, still.covariances, still.heard, None,
              still.consider)
-        motion_info |= still.summary | {"consider_terms": [term for term, known in (
-            ("survey", survey is not None), ("sound speed", bool(speed_sigma)),
+        motion_info |= still.summary | {"consider_terms": [term for term, known in (  # the speed's: where not fitted
+            ("survey", survey is not None),
+            ("sound speed", bool(speed_sigma) and still.summary["still"]["speed_change_m_s"] is None),
             ("clocks", clock_sigma is not None and bool(np.nan_to_num(clock_sigma).any()))) if known]}
         # a place refuted by the tag's own fixes (no row after the change is a place to take), or one nothing checks
         for marked, reason in ((still.moved, "tag_moved"), (np.full(len(still.moved), still.unchecked),

@@ -153,3 +153,20 @@ def test_four_receivers_calibrate_a_still_tags_speed_from_it_as_one_place(tmp_pa
     assert (outcome.track["quality"] == "ok").all(), outcome.track["quality_reason"].value_counts()
     moving = track(toa, receivers, toa_sigma=SIGMA, other_filters=False, smooth=False)
     assert moving.summary["sound_speed"]["source"] == "fallback", moving.summary["sound_speed"]
+
+
+def test_the_speeds_change_is_fitted_and_not_also_a_consider_term(tmp_path):
+    """A day's record: the summary's fitted change spans the water's ±5 m/s about the calibrated speed, and the
+    calibrated speed's error is no consider term (the fit holds it); two hours of pings: no change fitted (null)
+    and the speed's consider term back."""
+    toa, receivers, _ = _record(tmp_path, 2)
+    day = track(toa, receivers, motion="stationary", toa_sigma=SIGMA, other_filters=False).summary
+    c = day["sound_speed"]["sound_speed_m_s"]
+    low, high = day["motion"]["still"]["speed_change_m_s"]
+    truth = 1480.0 + 5.0 * np.array([-1.0, 1.0]) - c  # the water's least and largest, about the calibrated speed
+    assert np.allclose([low, high], truth, atol=1.0), (low, high, truth)
+    assert day["sound_speed"].get("sigma_m_s") and "sound speed" not in day["motion"]["consider_terms"]
+    toa, receivers, _ = _record(tmp_path, 2, n=50)  # about 100 minutes: fewer than two knots' spacing
+    short = track(toa, receivers, motion="stationary", toa_sigma=SIGMA, other_filters=False).summary
+    assert short["motion"]["still"]["speed_change_m_s"] is None
+    assert "sound speed" in short["motion"]["consider_terms"]
