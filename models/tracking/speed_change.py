@@ -35,9 +35,9 @@ import numpy as np
 from scipy.sparse import csr_array, diags_array
 from scipy.sparse.linalg import splu
 
-from sblsim.models.declarations import ModelError
+from sblsim.models.tracking import stationary as st
 from sblsim.models.tracking.smoother_cost import ROBUST_DOF, observed_information
-from sblsim.models.tracking.stationary import ITERATIONS, TOLERANCE, StationaryFix, _centred, stationary_fix
+from sblsim.models.tracking.stationary import ITERATIONS, TOLERANCE, StationaryFix, _centred
 from sblsim.models.tracking.still import SLOW_TIME_S, SPEED_WANDER
 from sblsim.models.tracking.toa import checked_sigma
 
@@ -121,14 +121,9 @@ def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     pinged = heard.any(axis=1)
     times = np.where(pinged, np.nanmin(np.where(heard, toa, np.inf), axis=1), np.nan)
     if pinged.sum() < MIN_PINGS or np.ptp(times[pinged]) < 2.0 * spacing:
-        fix = stationary_fix(toa, receivers, c, sigma_toa, start, dof)
+        fix = st.stationary_fix(toa, receivers, c, sigma_toa, start, dof)
         return SpeedChangeFix(fix, np.zeros(m), toa, 0)
-    p = np.asarray(start, float).copy()
-    if p.shape != (dim,) or not np.isfinite(p).all():
-        raise ModelError(f"stationary tag: a start of shape {p.shape} or not finite; allowed: ({dim},), finite")
-    if heard.any(axis=0).sum() < dim + 1:
-        raise ModelError(f"stationary tag: {int(heard.any(axis=0).sum())} receivers heard it; allowed: at least "
-                         f"{dim + 1}")
+    p = st.checked_start(heard, receivers, start)
     sigma = np.broadcast_to(np.asarray(checked_sigma(sigma_toa, n), float), (n,))
     y = np.where(heard, toa, 0.0)
     B = _basis(times, spacing)
@@ -144,14 +139,8 @@ def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
         rho = np.linalg.norm(diff, axis=1)
         s = B @ a
         emitted = y - rho[None, :] * (1.0 + s[:, None]) / c
-        for _ in range(50):
-            r = np.where(heard, _centred(emitted, w / sigma**2), 0.0) / sigma
-            new = np.where(heard, (dof + 1.0) / (dof + r**2), 0.0)
-            if np.abs(new - w).max() < 1e-12:
-                break
-            w = new
+        r, w = st.settled(heard, emitted, w, sigma, dof)
         wp = w / sigma**2
-        r = np.where(heard, _centred(emitted, wp), 0.0) / sigma
         unit = diff / np.maximum(rho, 1e-9)[:, None] / c
         Jp = -(1.0 + s)[:, None, None] * np.broadcast_to(unit, heard.shape + (dim,))
         Jp = np.where(heard[..., None], _centred(Jp, wp), 0.0) / sigma[:, None]
@@ -181,11 +170,9 @@ def speed_change_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa
     r, w, Jp, g, emitted, rho = terms(p, a, w)
     Npp, Npa, lu = blocks(np.where(heard, observed_information(r, dof), 0.0), Jp, g)
     covariance = np.linalg.pinv(Npp - Npa @ lu.solve(np.ascontiguousarray(Npa.T)))  # the place's block of the inverse
-    wp = w / sigma**2
-    total = wp.sum(axis=1)
-    emissions = np.where(total > 0, (wp * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
     s = np.where(pinged, B @ a, 0.0)
-    fix = StationaryFix(p, 0.5 * (covariance + covariance.T), emissions, w, int(pinged.sum()), iterations)
+    fix = StationaryFix(p, 0.5 * (covariance + covariance.T), st.emission_times(emitted, w, sigma), w,
+                        int(pinged.sum()), iterations)
     return SpeedChangeFix(fix, s, np.where(heard, toa - rho[None, :] * s[:, None] / c, np.nan), K)
 
 

@@ -79,6 +79,46 @@ def _information(heard: np.ndarray, unit: np.ndarray, emitted: np.ndarray, w: np
     return info, J
 
 
+def checked_start(heard: np.ndarray, receivers: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """A pooled fit's first position (dim,) [m], a copy, checked with the arrivals ``heard`` (m, n).
+
+    Raises
+    ------
+    ModelError
+        Fewer than dim + 1 receivers heard the tag, or the start is not (dim,) and finite (one line).
+    """
+    dim = receivers.shape[1]
+    if heard.any(axis=0).sum() < dim + 1:
+        raise ModelError(f"stationary tag: {int(heard.any(axis=0).sum())} receivers heard it; allowed: at least "
+                         f"{dim + 1}")
+    p = np.asarray(start, float).copy()
+    if p.shape != (dim,) or not np.isfinite(p).all():
+        raise ModelError(f"stationary tag: a start of shape {p.shape} or not finite; allowed: ({dim},), finite")
+    return p
+
+
+def settled(heard: np.ndarray, emitted: np.ndarray, w: np.ndarray, sigma_toa: float | np.ndarray,
+            dof: float) -> tuple[np.ndarray, np.ndarray]:
+    """The arrivals' normalised residuals and Student-t weights (m, n) at a place, each ping's emission time the
+    weighted mean of its arrivals' ``emitted`` (m, n) [s] (IRLS of the Student-t location from the weights ``w``, to
+    its fixed point; 0 where not ``heard``)."""
+    for _ in range(50):
+        r = np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa
+        new = np.where(heard, (dof + 1.0) / (dof + r**2), 0.0)
+        if np.abs(new - w).max() < 1e-12:
+            break
+        w = new
+    return np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa, w
+
+
+def emission_times(emitted: np.ndarray, w: np.ndarray, sigma_toa: float | np.ndarray) -> np.ndarray:
+    """Each ping's emission time (m,) [s]: its arrivals' ``emitted`` (m, n) [s] averaged with the weights ``w``
+    (over ``σ_i²`` where the timing noise is each receiver's); NaN for a ping nobody heard."""
+    wp = _per_ping(w, sigma_toa)
+    total = wp.sum(axis=1)
+    return np.where(total > 0, (wp * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
+
+
 def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray, start: np.ndarray,
                    dof: float = ROBUST_DOF) -> StationaryFix:
     """The position of a stationary tag from all its pings (module docstring).
@@ -111,33 +151,17 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
     receivers = np.asarray(receivers, float)
     heard = np.isfinite(toa)
     n, dim = receivers.shape
-    if heard.any(axis=0).sum() < dim + 1:
-        raise ModelError(f"stationary tag: {int(heard.any(axis=0).sum())} receivers heard it; allowed: at least "
-                         f"{dim + 1}")
-    p = np.asarray(start, float).copy()
-    if p.shape != (dim,) or not np.isfinite(p).all():
-        raise ModelError(f"stationary tag: a start of shape {p.shape} or not finite; allowed: ({dim},), finite")
+    p = checked_start(heard, receivers, start)
     sigma_toa = checked_sigma(sigma_toa, n)
     y = np.where(heard, toa, 0.0)
 
     w = heard.astype(float)
 
-    def settle(emitted: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The emission times and the weights at a position: each ping's emission time the weighted mean of its
-        arrivals' (IRLS of the Student-t location, to its fixed point), the normalised residuals and weights there."""
-        for _ in range(50):
-            r = np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa
-            new = np.where(heard, (dof + 1.0) / (dof + r**2), 0.0)
-            if np.abs(new - w).max() < 1e-12:
-                break
-            w = new
-        return np.where(heard, _centred(emitted, _per_ping(w, sigma_toa)), 0.0) / sigma_toa, w
-
     iterations = 0
     for _ in range(ITERATIONS):
         iterations += 1
         unit, emitted = _geometry(y, receivers, c, p)
-        r, w = settle(emitted, w)
+        r, w = settled(heard, emitted, w, sigma_toa, dof)
         J = np.where(heard[..., None], _centred(np.broadcast_to(-unit, heard.shape + (dim,)), _per_ping(w, sigma_toa)),
                      0.0) / _columns(sigma_toa)
         normal = np.einsum("mn,mni,mnj->ij", w, J, J)
@@ -147,14 +171,11 @@ def stationary_fix(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: 
         if np.abs(step).max() < TOLERANCE:
             break
     unit, emitted = _geometry(y, receivers, c, p)
-    _, w = settle(emitted, w)
+    _, w = settled(heard, emitted, w, sigma_toa, dof)
     info, J = _information(heard, unit, emitted, w, sigma_toa, dof)
     covariance = np.linalg.pinv(np.einsum("mn,mni,mnj->ij", info, J, J))
-    wp = _per_ping(w, sigma_toa)
-    total = wp.sum(axis=1)
-    emissions = np.where(total > 0, (wp * emitted).sum(axis=1) / np.where(total > 0, total, 1.0), np.nan)
-    return StationaryFix(p, 0.5 * (covariance + covariance.T), emissions, w, int(heard.any(axis=1).sum()),
-                         iterations)
+    return StationaryFix(p, 0.5 * (covariance + covariance.T), emission_times(emitted, w, sigma_toa), w,
+                         int(heard.any(axis=1).sum()), iterations)
 
 
 def bias_sensitivity(toa: np.ndarray, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
@@ -333,4 +354,5 @@ def moved(fixes: np.ndarray, times: np.ndarray, trusted: np.ndarray, seed: int =
 
 
 __all__ = ["ITERATIONS", "JACKKNIFE_ITERATIONS", "MAX_FIXES", "MIN_FIXES", "PERMUTATIONS", "TOLERANCE", "StationaryFix",
-           "bias_sensitivity", "moved", "receiver_jackknife", "stationary_fix"]
+           "bias_sensitivity", "checked_start", "emission_times", "moved", "receiver_jackknife", "settled",
+           "stationary_fix"]
