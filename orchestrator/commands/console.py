@@ -89,9 +89,10 @@ def add_refinement(p: argparse.ArgumentParser, what: str) -> None:
                    help=f"refine the receivers' horizontal positions {what} (a prior of --survey-sigma at the "
                         "table's); writes positions.csv")
     p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
-                   help=f"the table's horizontal sigma per axis [m] in [0.01, 1000]: with --refine-positions its "
-                        f"prior (default {SURVEY_SIGMA:g}: a handheld GPS's); without, the survey's stated error in "
-                        "every sigma (default: the positions taken as exact)")
+                   help=f"the table's horizontal sigma per axis [m]: with --refine-positions its prior in [0.01, "
+                        f"1000] (default {SURVEY_SIGMA:g}: a handheld GPS's); without, the survey's stated error in "
+                        "every sigma, in [0, 1000] (0: the positions taken as exact; default: the error the "
+                        "synchronisation's residuals show where seen, else exact)")
 
 
 def add_receivers(p: argparse.ArgumentParser, required: bool = True) -> None:

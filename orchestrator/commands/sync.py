@@ -241,7 +241,7 @@ def main(args: argparse.Namespace) -> int:
     rejected = d["used"] - d["kept"]
     print(f"  arrivals: {d['kept']} kept, {rejected} rejected, {d['multipath']} multipath, {d['single_receiver']} "
           f"heard by one receiver only; median |residual| {s['median_abs_residual_m']:.3g} m")
-    seen = survey_line(s.get("survey_error"), s.get("survey_sigma_m"))
+    seen = survey_line(s.get("survey_error"), s.get("survey_sigma_m"), s.get("survey_sigma_from"))
     if seen:
         print(f"  {seen}")
     noise = {r: v["toa_sigma_s"] for r, v in s.get("toa_noise", {}).items() if math.isfinite(v["toa_sigma_s"])}

@@ -10,9 +10,11 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.pings import group_pings
+from sblsim.models.sync.pings import group_pings, largest_travel_time
+from sblsim.models.sync.resolution import check_resolution, time_quantum
 from sblsim.models.sync.scale import (
     NOMINAL_SOUND_SPEED,
+    SPEED_TOLERANCE,
     Scale,
     check_scale,
     distance_scale,
@@ -21,6 +23,7 @@ from sblsim.models.sync.scale import (
 )
 from sblsim.models.tracking.strays import stable_interval
 from sblsim.orchestrator.readers.transmitters import match
+from sblsim.orchestrator.sync.clock_tables import _reasons
 
 #: What a refusal of the receivers' positions allows.
 ALLOWED = ("positions in metres (x_m, y_m in a local frame or a projected CRS), or latitude and longitude as lat, "
@@ -175,5 +178,45 @@ def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float,
                      f"the positions look like {unit}; allowed: {ALLOWED}")
 
 
+def checks_before_fit(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receivers_file: str | None,
+                      names: list[str], tag_names: list[str], receiver: np.ndarray, tag: np.ndarray,
+                      emission: np.ndarray, duplicate: np.ndarray, positions: np.ndarray, sound_speed: float | None,
+                      series: tuple[np.ndarray, np.ndarray] | None, alternatives: dict[str, pd.DataFrame]
+                      ) -> list[str]:
+    """The checks before the clocks are fitted (:func:`~sblsim.orchestrator.sync.run.synchronise`'s docstring) on
+    the sync tags' arrivals (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo), at
+    the sound speed given (a series' median), else the water's nominal: the table's distances weighed against the
+    travel times (a table of degrees too small to weigh refused first), the times' rounding against the travel time
+    across the array (the table's at the travel times' own scale: a table in another unit is never taken for a
+    rounding), then the table's verdict, naming ``receivers_file`` (None: the receivers), and where it refuses the
+    table, the first of ``alternatives`` (another reading of the positions) whose distances the travel times take
+    named as the cause. Returns the lines said (a table slightly off)."""
+    times = sync["time"].to_numpy(float)
+    given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
+    speed = given or NOMINAL_SOUND_SPEED
+    arrivals = pd.DataFrame({"receiver": np.array(names, dtype=object)[receiver],
+                             "tag": np.array(tag_names, dtype=object)[tag], "emission": emission, "time": times,
+                             "reason": _reasons(np.where(duplicate, 1, 0))})
+    found = sync_scale(arrivals, hydrophones, hydrophones, given, time_quantum(times))
+    where = "receivers" if receivers_file is None else f"receivers {receivers_file!r}"
+    if found is None:
+        check_sync_positions(None, hydrophones, where, given)
+    factor = found.scale if found is not None and found.scale > 0 else 1.0
+    check_resolution(times, largest_travel_time(positions[np.unique(receiver)], speed) * factor, speed,
+                     f"detections {source!r}")
+    try:
+        said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
+    except ModelError as refused:
+        for cause, table in alternatives.items():
+            other = sync_scale(arrivals, hydrophones, table, given, time_quantum(times))
+            if other is not None and abs(other.scale - 1.0) <= SPEED_TOLERANCE:
+                raise ModelError(f"{where}: the sync tags' travel times fit the positions with {cause} (the "
+                                 f"distances by sound {other.scale:.3f} times the table's then), not as given "
+                                 f"({found.scale:.3f} times); allowed: each position as the table's columns name it "
+                                 "(latitude under lat, longitude under lon)") from None
+        raise refused
+    return [said] if said else []
+
+
 __all__ = ["ALLOWED", "NOMINAL_SOUND_SPEED", "PROBE_WINDOW", "SPREAD_FACTOR", "check_arrival_spread", "check_matrix",
-           "check_sync_positions", "sync_scale"]
+           "check_sync_positions", "checks_before_fit", "sync_scale"]

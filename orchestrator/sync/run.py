@@ -36,9 +36,7 @@ from sblsim.models.sync.emissions import MIN_SHARED, connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
-from sblsim.models.sync.pings import largest_travel_time
-from sblsim.models.sync.resolution import check_resolution, residual_warning, time_quantum
-from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED, SPEED_TOLERANCE
+from sblsim.models.sync.resolution import residual_warning, time_quantum
 from sblsim.models.sync.season import breaks_in_windows
 from sblsim.models.sync.windows import OVERLAP_HOURS, WINDOW_DAYS, season_windows
 from sblsim.orchestrator.io.arguments import whole
@@ -47,9 +45,9 @@ from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.clock_tables import _offsets, _reasons, _summary
-from sblsim.orchestrator.sync.declared import check_sync_positions, sync_scale
+from sblsim.orchestrator.sync.declared import checks_before_fit
 from sblsim.orchestrator.sync.refined_positions import _identify, _kept, _positions
-from sblsim.orchestrator.sync.survey_seen import seen_survey_error
+from sblsim.orchestrator.sync.survey_seen import seen_in_fit
 from sblsim.orchestrator.sync.sync_tags import _sync_tags
 
 #: The detections' columns the synchronisation copies with its rows (others, as a VUE export's sensor values, not).
@@ -163,9 +161,11 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         [m] the table's horizontal sigma per axis (the survey's stated error): with ``refine_positions`` the
         refinement's prior (default :data:`SURVEY_SIGMA`); without, a term of each sync tag's NEES
         (``sync_tags.csv``: its fixes' or place's covariance and the survey's of its receiver's position summed, and
-        of each place's consider covariance; default none, the table's positions taken as exact), then in
-        ``summary["survey_sigma_m"]``; without ``refine_positions`` also each receiver's, by its serial (a receiver
-        not named: exact).
+        of each place's consider covariance), then in ``summary["survey_sigma_m"]``; without ``refine_positions``
+        also each receiver's, by its serial (a receiver not named: exact), or 0: the table's positions taken as
+        exact. Default without ``refine_positions``: the survey error the residuals between receivers show
+        (:mod:`sblsim.models.sync.survey_error`, ``summary["survey_error"]``) where seen, taken as the stated one
+        (``summary["survey_sigma_from"]`` ``"seen"``), else exact.
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
@@ -200,12 +200,12 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         each = isinstance(survey_sigma, Mapping)  # each receiver's (a study on refined positions)
         table = np.array([float(survey_sigma.get(r, 0.0)) for r in hydrophones["receiver"]]) if each else \
             survey_sigma
-        outcome = _synchronise(*args, timings=timings, table_sigma=table, receivers_file=receivers_file,
-                               alternatives=alternatives, window_days=window_days)
+        outcome = _synchronise(*args, timings=timings, table_sigma=None if table == 0 else table,
+                               receivers_file=receivers_file, alternatives=alternatives, window_days=window_days,
+                               survey="taken" if survey_sigma is None else "said")
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
-            outcome.summary["survey_sigma_m"] = dict(survey_sigma) if each else float(survey_sigma)
-        seen = seen_survey_error(outcome.residuals, outcome.sync_tags, outcome.receivers)  # on the table's positions
-        outcome.summary["survey_error"] = None if seen is None else seen.summary()
+            outcome.summary |= {"survey_sigma_m": dict(survey_sigma) if each else float(survey_sigma),
+                                "survey_sigma_from": "stated"}
         return outcome
     if isinstance(survey_sigma, Mapping):
         raise TypeError("survey_sigma: one prior for the refinement, not each receiver's")
@@ -223,11 +223,14 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
                  table_sigma: float | np.ndarray | None = None, receivers_file: str | None = None,
-                 alternatives: dict[str, pd.DataFrame] | None = None, window_days: float | None = None
-                 ) -> SyncOutcome:
+                 alternatives: dict[str, pd.DataFrame] | None = None, window_days: float | None = None,
+                 survey: str | None = None) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
-    as :func:`synchronise` (its parameters, ``table_sigma`` aside).
+    as :func:`synchronise` (its parameters, ``table_sigma`` and ``survey`` aside). ``survey`` ``"said"``: the survey
+    error the residuals show (:func:`~sblsim.orchestrator.sync.survey_seen.seen_in_fit`) in
+    ``summary["survey_error"]``; ``"taken"`` too, and where seen it is the table's error (``table_sigma``) the sync
+    tags are scored with, ``summary["survey_sigma_m"]`` (``survey_sigma_from`` ``"seen"``).
 
     Returns
     -------
@@ -291,8 +294,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     positions = xyz[:, :dim]
     distance = np.linalg.norm(positions[tag_home[tag]] - positions[receiver], axis=1)
     # said or refused before the work: the table's unit and the times' rounding
-    notes_first = _checks(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver, tag,
-                          emission, duplicate, positions, sound_speed, series, alternatives or {})
+    notes_first = checks_before_fit(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver,
+                                    tag, emission, duplicate, positions, sound_speed, series, alternatives or {})
     resets, line = _resets(detections, sync), sync["line"].to_numpy()
     del sync  # (a copy of the season's sync-tag rows, not held through the fit)
 
@@ -373,13 +376,17 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         # pooling them does not average (the stationary fix's consider term)
         offsets["clock_sigma_s"] = noise.clock[[names.index(r) for r in offsets["receiver"]]]
     tick = clock.perf_counter()
+    emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
+    seen = None if survey is None else seen_in_fit(receiver, tag, fit.residual / emission_slowness, distance, names,
+                                                   tag_names, tag_home, positions)  # on the table's positions
+    if survey == "taken" and seen is not None and seen.seen:  # the sync tags scored with it
+        table_sigma = seen.sigma
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
                            width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
                            fits, table_sigma, windows)
     refined = _positions(fit, positions, names, linked, identified, tag_names) if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
     reason = _reasons(np.select([duplicate, single, rows < 0, ~on, ~fit.kept], [1, 2, 3, 4, 5], 0))
-    emission_slowness = (np.full(len(time), fit.slowness) if slowness is None else slowness)
     # every arrival's row made once the sync tags are scored (not held through their refits), on the fit's arrays
     residuals = pd.DataFrame({
         "receiver": np.array(names, dtype=object)[receiver], "tag": np.array(tag_names, dtype=object)[tag],
@@ -392,6 +399,10 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
                        dim, clock.perf_counter() - started)
+    if survey is not None:
+        summary["survey_error"] = None if seen is None else seen.summary()
+        if survey == "taken" and table_sigma is not None:
+            summary |= {"survey_sigma_m": float(table_sigma), "survey_sigma_from": "seen"}
     rounded = residual_warning([time_quantum(time[receiver == j] + origin) for j in range(n_receivers)], noise.noise,
                                names, 1.0 / float(np.median(emission_slowness)), f"detections {detections.source!r}")
     if notes_first or rounded:  # said first: the table's unit, the rounding
@@ -444,45 +455,6 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         summary["windows"] = {"days": float(window_days), "overlap_hours": OVERLAP_HOURS, "count": len(windows),
                               "edges": (windows.edges + origin).tolist()}
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
-
-
-def _checks(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receivers_file: str | None, names: list[str],
-            tag_names: list[str], receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, duplicate: np.ndarray,
-            positions: np.ndarray, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
-            alternatives: dict[str, pd.DataFrame]) -> list[str]:
-    """The checks before the clocks are fitted (:func:`synchronise`'s docstring) on the sync tags' arrivals
-    (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo), at the sound speed given (a
-    series' median), else the water's nominal: the table's distances weighed against the travel times (a table of
-    degrees too small to weigh refused first), the times' rounding against the travel time across the array (the
-    table's at the travel times' own scale: a table in another unit is never taken for a rounding), then the
-    table's verdict, naming ``receivers_file`` (None: the receivers), and where it refuses the table, the first of
-    ``alternatives`` (another reading of the positions) whose distances the travel times take named as the cause.
-    Returns the lines said (a table slightly off)."""
-    times = sync["time"].to_numpy(float)
-    given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
-    speed = given or NOMINAL_SOUND_SPEED
-    arrivals = pd.DataFrame({"receiver": np.array(names, dtype=object)[receiver],
-                             "tag": np.array(tag_names, dtype=object)[tag], "emission": emission, "time": times,
-                             "reason": _reasons(np.where(duplicate, 1, 0))})
-    found = sync_scale(arrivals, hydrophones, hydrophones, given, time_quantum(times))
-    where = "receivers" if receivers_file is None else f"receivers {receivers_file!r}"
-    if found is None:
-        check_sync_positions(None, hydrophones, where, given)
-    factor = found.scale if found is not None and found.scale > 0 else 1.0
-    check_resolution(times, largest_travel_time(positions[np.unique(receiver)], speed) * factor, speed,
-                     f"detections {source!r}")
-    try:
-        said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
-    except ModelError as refused:
-        for cause, table in alternatives.items():
-            other = sync_scale(arrivals, hydrophones, table, given, time_quantum(times))
-            if other is not None and abs(other.scale - 1.0) <= SPEED_TOLERANCE:
-                raise ModelError(f"{where}: the sync tags' travel times fit the positions with {cause} (the "
-                                 f"distances by sound {other.scale:.3f} times the table's then), not as given "
-                                 f"({found.scale:.3f} times); allowed: each position as the table's columns name it "
-                                 "(latitude under lat, longitude under lon)") from None
-        raise refused
-    return [said] if said else []
 
 
 def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int], dict]:

@@ -27,9 +27,16 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
     # text keys makes its own lookups of every row's texts)
     receiver, receivers = pd.factorize(residuals["receiver"].astype(str))
     tag, tags = pd.factorize(residuals["tag"].astype(str))
+    return _grouped(receiver, receivers, tag, tags, residuals["residual_m"].to_numpy(float), used)
+
+
+def _grouped(receiver: np.ndarray, receivers: pd.Index, tag: np.ndarray, tags: pd.Index, residual_m: np.ndarray,
+             used: np.ndarray) -> pd.DataFrame:
+    """:func:`pairs` of the arrivals ``used`` (n,), each of receiver ``receivers[receiver]`` and sync tag
+    ``tags[tag]`` (integer codes (n,)) with its residual [m]."""
     n = max(len(tags), 1)
     key = receiver[used].astype(np.int64) * n + tag[used]
-    values = pd.Series(residuals["residual_m"].to_numpy(float)[used])
+    values = pd.Series(residual_m[used])
     groups = values.groupby(key)
     table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
     table["scale"] = 1.4826 * (values - groups.transform("median")).abs().groupby(key).median()
@@ -53,9 +60,39 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
     receivers : pandas.DataFrame
         The receivers' ``receiver``, ``x``, ``y`` [m] as the table gives them.
     """
-    table = pairs(residuals, rejected=True)
     home = dict(zip(sync_tags["tag"].astype(str), sync_tags["receiver"].astype(str)))
-    names = receivers["receiver"].astype(str).tolist()
+    return _seen(pairs(residuals, rejected=True), home, receivers["receiver"].astype(str).tolist(),
+                 receivers[["x", "y"]].to_numpy(float))
+
+
+def seen_in_fit(receiver: np.ndarray, tag: np.ndarray, residual_m: np.ndarray, distance: np.ndarray,
+                names: list[str], tag_names: list[str], tag_home: np.ndarray, positions: np.ndarray
+                ) -> SurveyError | None:
+    """:func:`seen_survey_error` from a synchronisation's own arrays, before its tables are made (the same pairs
+    and the same figures: the sync tags' scores may then take it).
+
+    Parameters
+    ----------
+    receiver, tag : ndarray of int, (n,)
+        Each arrival's receiver (a row of ``names``) and sync tag (of ``tag_names``).
+    residual_m : ndarray, (n,)
+        Its residual [m] (NaN where it has none).
+    distance : ndarray, (n,)
+        From the tag's own receiver [m] (0: its own).
+    names, tag_names : list of str
+    tag_home : ndarray of int, (tags,)
+        Each sync tag's own receiver.
+    positions : ndarray, (R, ≥ 2)
+        The receivers' positions as the table gives them [m].
+    """
+    used = np.isfinite(residual_m) & (distance > 0)
+    table = _grouped(receiver, pd.Index(names), tag, pd.Index(tag_names), residual_m, used)
+    return _seen(table, {t: names[h] for t, h in zip(tag_names, tag_home)}, names, positions)
+
+
+def _seen(table: pd.DataFrame, home: dict[str, str], names: list[str], positions: np.ndarray) -> SurveyError | None:
+    """The survey error of the pairs ``table`` (:func:`pairs`), each tag's own receiver by ``home``, the receivers
+    ``names`` at ``positions`` [m]; None where no pair is left."""
     index = {n: i for i, n in enumerate(names)}
     own = table["tag"].map(home)
     table, own = (t[own.isin(index) & table["receiver"].isin(index) & (own != table["receiver"])] for t in (table, own))
@@ -65,7 +102,7 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
     return survey_error(table["median"].to_numpy(float), table["count"].to_numpy(float),
                         table["scale"].to_numpy(float), table["receiver"].map(index).to_numpy(int),
                         own.map(index).to_numpy(int), table["tag"].map(tags).to_numpy(int),
-                        receivers[["x", "y"]].to_numpy(float))
+                        np.asarray(positions, float)[:, :2])
 
 
-__all__ = ["pairs", "seen_survey_error"]
+__all__ = ["pairs", "seen_in_fit", "seen_survey_error"]

@@ -64,7 +64,7 @@ from sblsim.orchestrator.sync.toa import build_toa
 from sblsim.orchestrator.telemetry.census import TRACK_OPTIONS, code_of, count, verdict
 from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
-from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
+from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, taken_survey
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
@@ -244,8 +244,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         [m] the receivers' surveyed positions' σ per horizontal axis: with ``refine_positions`` the refinement's
         prior (default :data:`~sblsim.models.sync.identifiability.SURVEY_SIGMA`); without, the survey's stated
         error, a consider term of every σ (each tag's track, the reference tags' known positions at a deployment,
-        the sync tags left out: :func:`~sblsim.orchestrator.telemetry.reference_tags.score`); default none, the
-        positions taken as exact.
+        the sync tags left out: :func:`~sblsim.orchestrator.telemetry.reference_tags.score`), 0: the positions taken
+        as exact; default: the survey error the synchronisation made here sees in its residuals between receivers
+        (:mod:`sblsim.models.sync.survey_error`), taken as the stated one where seen
+        (``summary["clocks"]["survey_sigma_from"]`` ``"seen"``), else exact.
     resume : Resume, optional
         The tags kept by an interrupted run of the same output (:mod:`~sblsim.orchestrator.tracks.resume`): a tag
         whose inputs are unchanged is taken from it, each tag that ends is kept (``summary["resumed"]``).
@@ -310,6 +312,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored)
+        taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
+        scored = taken if survey is None else survey
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs
         rows: dict[str, dict[str, Any]] = {}
@@ -361,7 +365,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                            "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
                            "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
                            "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
-                           "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": stated}
+                           "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
                 if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                     options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                 np.isfinite(matrix.toa).any(axis=0))

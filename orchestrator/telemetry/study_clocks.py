@@ -60,7 +60,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                     "clock_breaks": s["clock_breaks"],
                     "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
                     "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m"),
-                    "survey_error": s.get("survey_error"), "survey_sigma_m": s.get("survey_sigma_m")}
+                    "survey_error": s.get("survey_error"), "survey_sigma_m": s.get("survey_sigma_m"),
+                    "survey_sigma_from": s.get("survey_sigma_from")}
             if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
                 info["windows"] = s["windows"]
             return offsets_clocks(outcome.offsets), table, info, outcome
@@ -76,4 +77,16 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
 
 
-__all__ = ["TOO_COARSE", "study_clocks"]
+def taken_survey(stated: float | None, refine: bool, info: dict) -> float | None:
+    """The receivers' survey error [m per horizontal axis] a study's σ take: the one ``stated`` (0: none, the
+    positions taken as exact), else, without the refinement (``refine``: its prior is the survey's), the error the
+    synchronisation made here saw in its residuals and took (``info``: :func:`study_clocks`' summary, its
+    ``survey_sigma_from`` ``"seen"``), else None (exact)."""
+    if stated is not None:
+        return None if stated == 0 else stated
+    if refine or info.get("survey_sigma_from") != "seen":
+        return None
+    return float(info["survey_sigma_m"])
+
+
+__all__ = ["TOO_COARSE", "study_clocks", "taken_survey"]

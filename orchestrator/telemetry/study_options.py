@@ -25,7 +25,8 @@ MAX_WORKERS = 256
 
 def survey_sigma_argument(value: Any, refine: bool, where: str) -> float | None:
     """The survey σ [m] checked, in :data:`SURVEY_SIGMA_RANGE`: with the refinement its prior (default
-    :data:`SURVEY_SIGMA`); without, the survey's stated error (default None: the positions taken as exact).
+    :data:`SURVEY_SIGMA`); without, the survey's stated error, from 0 (the positions taken as exact; default None:
+    the error the synchronisation's residuals show where seen, else exact).
 
     Raises
     ------
@@ -34,7 +35,7 @@ def survey_sigma_argument(value: Any, refine: bool, where: str) -> float | None:
     """
     if value is None:
         return SURVEY_SIGMA if refine else None
-    return real_argument(value, where, *SURVEY_SIGMA_RANGE, "m")
+    return real_argument(value, where, SURVEY_SIGMA_RANGE[0] if refine else 0.0, SURVEY_SIGMA_RANGE[1], "m")
 
 
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
