@@ -295,3 +295,49 @@ def test_a_stated_survey_error_is_in_every_sigma(study):
     assert (left["nees"] < before.loc[left.index, "nees"]).all()
     assert outcome.summary["reference_tags"]["reference"]["nees_mean"] == pytest.approx(
         scored.loc[refs, "nees"].mean())
+
+
+@pytest.mark.slow
+def test_the_survey_error_the_synchronisation_sees_is_taken_where_none_is_stated(tmp_path):
+    """A study whose deployments are each off by N(0, 2 m) per axis and which states no survey error: its
+    synchronisation sees one in its residuals and takes it (``clocks.survey_sigma_from`` ``"seen"``), so the study
+    is the one made with that error stated (``reference_tags.csv`` and ``tracks.csv`` the same), and differs from
+    the study with ``survey_sigma=0`` (the positions taken as exact: the tracks' places the same, their σ smaller,
+    no survey term)."""
+    sim = simulate_study(n_receivers=9, n_tags=1, days=0.25, redeployed=0, seed=4)
+    files = sim.write(tmp_path / "in", "vue")
+    off = sim.positions[:, :2] + 2.0 * np.random.default_rng(11).normal(size=(len(sim.positions), 2))
+    lat, lon = sim.frame.to_latlon(off[:, 0], off[:, 1])
+    deployments = sim.deployments.assign(deploy_lat=lat, deploy_long=lon)
+    refs = deployments["transmitter"].iloc[list(AT[:1])].tolist()
+    deployments.loc[list(AT[:1]), "transmitter"] = ""
+    deployments.to_csv(files["deployments"], index=False, float_format="%.10f")
+    sheet = sim.sheet.copy()
+    sheet.loc[sheet["transmitter"].isin(refs), "role"] = "reference"
+    sheet["receiver"] = np.where(sheet["transmitter"].isin(refs), deployments.loc[AT[0], "station"], "")
+    sheet.to_csv(files["tags"], index=False)
+    chosen = refs + [t for t in sim.sheet["transmitter"] if t not in set(sim.deployments["transmitter"])]
+    found = {}
+    for label, survey in (("default", None), ("exact", 0.0)):
+        found[label] = run_study(files["detections"], files["deployments"], files["tags"], workdir=tmp_path / label,
+                                 chosen=chosen, workers=1, survey_sigma=survey)
+        write_study(found[label], tmp_path / label)
+    clocks = found["default"].summary["clocks"]
+    assert clocks["survey_error"]["seen"] and clocks["survey_sigma_from"] == "seen"
+    seen = clocks["survey_sigma_m"]
+    assert seen == clocks["survey_error"]["survey_sigma_m"] and 1.0 <= seen <= 3.5
+    assert found["exact"].summary["clocks"]["survey_sigma_from"] == "stated"
+    stated = run_study(files["detections"], files["deployments"], files["tags"], workdir=tmp_path / "stated",
+                       chosen=chosen, workers=1, survey_sigma=seen)
+    write_study(stated, tmp_path / "stated")
+    for name in ("reference_tags.csv", "tracks.csv"):
+        pd.testing.assert_frame_equal(_read(tmp_path / "default", name), _read(tmp_path / "stated", name))
+    taken, exact = (_read(tmp_path / label, "tracks.csv") for label in ("default", "exact"))
+    assert np.allclose(taken[["x", "y"]], exact[["x", "y"]])
+    assert (taken["sigma_x"] ** 2 + taken["sigma_y"] ** 2 > exact["sigma_x"] ** 2 + exact["sigma_y"] ** 2).all()
+    scored = _read(tmp_path / "default", "reference_tags.csv").set_index("tag")
+    assert scored.loc[refs[0], "survey_sigma_m"] == pytest.approx(seen)
+    assert np.isnan(_read(tmp_path / "exact", "reference_tags.csv").set_index("tag").loc[refs[0], "survey_sigma_m"])
+    tags = _read(tmp_path / "exact", "tags.csv").set_index("tag")
+    summary = json.loads((tmp_path / "exact" / tags.loc[refs[0], "folder"] / "summary.json").read_text())
+    assert "survey" not in summary["motion"]["consider_terms"]

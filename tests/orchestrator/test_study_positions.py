@@ -89,13 +89,16 @@ def test_each_positions_error_is_its_shape_sigma_or_the_surveys():
 
 
 def test_the_survey_sigma_is_the_prior_or_the_stated_error():
-    """With the refinement the survey σ is its prior (3 m unless given); without, the survey's stated error (None
-    unless given: the positions taken as exact), in range or refused."""
+    """With the refinement the survey σ is its prior (3 m unless given, above 0); without, the survey's stated error
+    (None unless given: the error the synchronisation sees, else exact; 0: exact), in range or refused."""
     assert survey_sigma_argument(None, True, "--survey-sigma") == SURVEY_SIGMA
     assert survey_sigma_argument(None, False, "--survey-sigma") is None
     assert survey_sigma_argument(1.5, False, "--survey-sigma") == 1.5 == survey_sigma_argument(1.5, True, "s")
+    assert survey_sigma_argument(0.0, False, "--survey-sigma") == 0.0
     with pytest.raises(Exception, match="--survey-sigma: 0.0 is outside"):
-        survey_sigma_argument(0.0, False, "--survey-sigma")
+        survey_sigma_argument(0.0, True, "--survey-sigma")
+    with pytest.raises(Exception, match="--survey-sigma: -0.5 is outside"):
+        survey_sigma_argument(-0.5, False, "--survey-sigma")
 
 
 @pytest.mark.parametrize("extra,message", [

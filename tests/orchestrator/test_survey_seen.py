@@ -10,7 +10,7 @@ import pytest
 
 from sblsim.models.sync.survey_error import MIN_PAIR_ARRIVALS, survey_error
 from sblsim.orchestrator.sync.survey_console import survey_line
-from sblsim.orchestrator.sync.survey_seen import pairs, seen_survey_error
+from sblsim.orchestrator.sync.survey_seen import pairs, seen_in_fit, seen_survey_error
 
 POSITIONS = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 250.0], [0.0, 250.0], [150.0, 120.0], [60.0, 200.0]])
 NAMES = [f"R{j}" for j in range(len(POSITIONS))]
@@ -107,3 +107,28 @@ def test_a_synchronisation_sees_positions_off_and_not_positions_right():
                                    reference="R0").summary["survey_error"]
     assert not found["right"]["seen"] and found["right"]["survey_sigma_m"] == 0.0
     assert found["off"]["seen"] and 1.0 <= found["off"]["survey_sigma_m"] <= 3.5, found["off"]
+
+
+def test_the_fits_arrays_give_what_its_tables_give():
+    """:func:`seen_in_fit` on the arrivals' codes and residuals (before a synchronisation's tables are made) is
+    :func:`seen_survey_error` on the same arrivals as tables."""
+    residuals, sync_tags, receivers = _residuals(2, sigma=2.0)
+    tag_names = ["S0", "S2", "S4"]
+    receiver = residuals["receiver"].map(NAMES.index).to_numpy()
+    tag = residuals["tag"].map(tag_names.index).to_numpy()
+    residual = residuals["residual_m"].to_numpy(float).copy()
+    residual[::7] = np.nan  # arrivals without a residual: in neither
+    found = seen_in_fit(receiver, tag, residual, residuals["distance_m"].to_numpy(float), NAMES, tag_names,
+                        np.array([0, 2, 4]), POSITIONS)
+    assert found == seen_survey_error(residuals.assign(residual_m=residual), sync_tags, receivers)
+    assert found.seen and found.pairs > 0
+
+
+def test_the_console_line_says_where_the_error_seen_was_taken():
+    seen = {"survey_sigma_m": 2.41, "survey_sigma_se_m": 0.47, "excess_z": 12.0, "seen": True, "pairs": 70,
+            "degrees": 45, "z_seen": 3.0}
+    taken = survey_line(seen, 2.41, "seen")
+    assert "2.41 ± 0.47 m per axis" in taken and "taken as the survey's error in every σ" in taken
+    assert "0 the positions as exact" in taken
+    assert survey_line(seen, 0.0, "stated").endswith("stated: 0 m (the positions taken as exact))")
+    assert survey_line(seen, 1.0, "stated").endswith("stated: 1 m)")
