@@ -266,6 +266,8 @@ def main(args: argparse.Namespace) -> int:
         t = s["sync_tags"]
         nees = t["nees_mean_inside"]
         against = (" (against their receivers' positions refined without them)" if "positions" in s else
+                   f" (the survey's error seen, {s['survey_sigma_m']:.3g} m per axis, in their NEES)"
+                   if s.get("survey_sigma_from") == "seen" else
                    f" (the survey's {s['survey_sigma_m']:g} m per axis in their NEES)" if "survey_sigma_m" in s else "")
         print(f"  sync tags positioned without their own receiver ({t['tags']}){against}: median error "
               f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else

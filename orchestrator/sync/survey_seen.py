@@ -56,7 +56,7 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
     residuals : pandas.DataFrame
         ``residuals.csv``: ``receiver``, ``tag``, ``distance_m``, ``residual_m``, ``kept``.
     sync_tags : pandas.DataFrame
-        ``sync_tags.csv``: each sync tag's own ``receiver``.
+        ``sync_tags.csv``: each sync tag's own ``receiver`` (a tag without a row there left out).
     receivers : pandas.DataFrame
         The receivers' ``receiver``, ``x``, ``y`` [m] as the table gives them.
     """
@@ -68,8 +68,9 @@ def seen_survey_error(residuals: pd.DataFrame, sync_tags: pd.DataFrame, receiver
 def seen_in_fit(receiver: np.ndarray, tag: np.ndarray, residual_m: np.ndarray, distance: np.ndarray,
                 names: list[str], tag_names: list[str], tag_home: np.ndarray, positions: np.ndarray
                 ) -> SurveyError | None:
-    """:func:`seen_survey_error` from a synchronisation's own arrays, before its tables are made (the same pairs
-    and the same figures: the sync tags' scores may then take it).
+    """:func:`seen_survey_error` from a synchronisation's own arrays, before its tables are made (so that the sync
+    tags' scores may take it): the pairs of every sync tag of ``tag_names``, those ``sync_tags.csv`` has no row
+    for (too few arrivals to be positioned without their own receiver) too.
 
     Parameters
     ----------
