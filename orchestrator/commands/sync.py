@@ -134,9 +134,10 @@ def sync(detections: str | Path, *, receivers: str | Path, format: str | None = 
         Refine the receivers' horizontal positions with the clocks (their sync tags with them), a Gaussian prior at
         the table's positions; written as ``positions.csv``. Default: the table's positions fixed.
     survey_sigma : float, optional
-        [m] in [0.01, 1000], the table's horizontal sigma per axis: with ``refine_positions`` the prior (default
-        3 m, a handheld GPS's); without, the survey's stated error in the sync tags' NEES (default none: the table's
-        positions taken as exact).
+        [m], the table's horizontal sigma per axis: with ``refine_positions`` the prior in [0.01, 1000] (default
+        3 m, a handheld GPS's); without, the survey's stated error in the sync tags' NEES, in [0, 1000] (0: the
+        table's positions taken as exact; default: the error the residuals between receivers show where seen,
+        ``sync.json``'s ``survey_sigma_from`` ``"seen"``, else exact).
     crs : str, optional
         The receivers' CRS (``EPSG:…``; WGS 84 for ``lat``, ``lon`` by default).
     frame : str, optional

@@ -158,7 +158,9 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         detections show.
     refine_positions, survey_sigma : bool, float
         Refine the receivers' positions from the study's pings, tracking again on them where that helps
-        (:mod:`sblsim.orchestrator.telemetry.study_positions`); the survey's σ per axis [m] in [0.01, 1000], 3.
+        (:mod:`sblsim.orchestrator.telemetry.study_positions`); the survey's σ per axis [m]: with the refinement
+        its prior in [0.01, 1000], 3 by default; without, the survey's stated error in every σ, in [0, 1000] (0: the
+        positions taken as exact; default: the error the synchronisation made here sees, taken where seen).
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
