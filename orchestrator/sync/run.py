@@ -200,7 +200,7 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         each = isinstance(survey_sigma, Mapping)  # each receiver's (a study on refined positions)
         table = np.array([float(survey_sigma.get(r, 0.0)) for r in hydrophones["receiver"]]) if each else \
             survey_sigma
-        outcome = _synchronise(*args, timings=timings, table_sigma=None if table == 0 else table,
+        outcome = _synchronise(*args, timings=timings, table_sigma=None if not each and table == 0 else table,
                                receivers_file=receivers_file, alternatives=alternatives, window_days=window_days,
                                survey="taken" if survey_sigma is None else "said")
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
