@@ -269,6 +269,7 @@ def main(args: argparse.Namespace) -> int:
         against = (" (against their receivers' positions refined without them)" if "positions" in s else
                    f" (the survey's error seen, {s['survey_sigma_m']:.3g} m per axis, in their NEES)"
                    if s.get("survey_sigma_from") == "seen" else
+                   " (the table's positions taken as exact: --survey-sigma 0)" if s.get("survey_sigma_m") == 0 else
                    f" (the survey's {s['survey_sigma_m']:g} m per axis in their NEES)" if "survey_sigma_m" in s else "")
         print(f"  sync tags positioned without their own receiver ({t['tags']}){against}: median error "
               f"{t['median_error_m']:.3g} m" + ("" if nees is None or not math.isfinite(nees) else

@@ -99,14 +99,28 @@ def test_a_synchronisation_sees_positions_off_and_not_positions_right():
                           "sensor_value": np.nan, "sensor_unit": "", "line": np.arange(len(t)) + 2})
     names = [f"R{j}" for j in range(8)]
     off = sim.positions[:, :2] + 2.0 * np.random.default_rng(7).normal(size=(8, 2))
-    found = {}
+    found, outcomes = {}, {}
     for label, xy in (("right", sim.positions[:, :2]), ("off", off)):
         hydrophones = pd.DataFrame({"receiver": names, "sync_tag": [f"S{j}" for j in range(8)], "x": xy[:, 0],
                                     "y": xy[:, 1], "z": np.nan})
-        found[label] = synchronise(Detections(frame, "simulated", "yaps"), hydrophones, sound_speed=sim.sound_speed,
-                                   reference="R0").summary["survey_error"]
+        outcomes[label] = synchronise(Detections(frame, "simulated", "yaps"), hydrophones,
+                                      sound_speed=sim.sound_speed, reference="R0")
+        found[label] = outcomes[label].summary["survey_error"]
     assert not found["right"]["seen"] and found["right"]["survey_sigma_m"] == 0.0
+    assert "survey_sigma_m" not in outcomes["right"].summary  # not seen: nothing taken, the positions exact
     assert found["off"]["seen"] and 1.0 <= found["off"]["survey_sigma_m"] <= 3.5, found["off"]
+    # seen and none stated: taken as the survey's, the sync tags scored as with it stated (and not as with 0)
+    taken = outcomes["off"].summary
+    assert taken["survey_sigma_from"] == "seen" and taken["survey_sigma_m"] == found["off"]["survey_sigma_m"]
+    hydrophones = pd.DataFrame({"receiver": names, "sync_tag": [f"S{j}" for j in range(8)], "x": off[:, 0],
+                                "y": off[:, 1], "z": np.nan})
+    for stated in (taken["survey_sigma_m"], 0.0):
+        again = synchronise(Detections(frame, "simulated", "yaps"), hydrophones, sound_speed=sim.sound_speed,
+                            reference="R0", survey_sigma=stated)
+        assert again.summary["survey_sigma_from"] == "stated" and again.summary["survey_error"] == found["off"]
+        same = np.allclose(again.sync_tags["nees_mean"], outcomes["off"].sync_tags["nees_mean"])
+        assert same == (stated > 0), stated
+        assert np.allclose(again.sync_tags["median_error_m"], outcomes["off"].sync_tags["median_error_m"])
 
 
 def test_the_fits_arrays_give_what_its_tables_give():
