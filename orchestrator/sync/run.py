@@ -121,7 +121,7 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                 survey_sigma: float | Mapping[str, float] | None = None, timings: dict | None = None,
                 receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None,
-                window_days: float | None = WINDOW_DAYS) -> SyncOutcome:
+                window_days: float | None = WINDOW_DAYS, take_seen: bool = True) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Before the clocks are fitted (once the sync tags' arrivals are grouped into emissions) the times' rounding is
@@ -166,6 +166,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         exact. Default without ``refine_positions``: the survey error the residuals between receivers show
         (:mod:`sblsim.models.sync.survey_error`, ``summary["survey_error"]``) where seen, taken as the stated one
         (``summary["survey_sigma_from"]`` ``"seen"``), else exact.
+    take_seen : bool
+        False: the survey error seen is said, not taken (a study whose positions are refined next).
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
@@ -202,7 +204,7 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
             survey_sigma
         outcome = _synchronise(*args, timings=timings, table_sigma=None if not each and table == 0 else table,
                                receivers_file=receivers_file, alternatives=alternatives, window_days=window_days,
-                               survey="taken" if survey_sigma is None else "said")
+                               survey="taken" if survey_sigma is None and take_seen else "said")
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
             outcome.summary |= {"survey_sigma_m": dict(survey_sigma) if each else float(survey_sigma),
                                 "survey_sigma_from": "stated"}

@@ -45,15 +45,16 @@ def _table_hash(table: pd.DataFrame) -> bytes:
 
 
 def clocks_key(assigned, sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
-               bin_hours: float, survey_sigma: float | None = None) -> str:
+               bin_hours: float, survey_sigma: float | None = None, take_seen: bool = True) -> str:
     """The hash (SHA-256, hex) of what a study's synchronisation reads: the assigned detections' table, source and
     clock resets, the receivers' table, the sound speed or its series, the bins [h], the survey's stated error [m]
-    (where stated) and sblsim's version."""
+    (where stated; where the error seen is not taken, that too) and sblsim's version."""
     digest = hashlib.sha256(b"clocks")
     digest.update(_table_hash(assigned.detections.frame))
     digest.update(_table_hash(assigned.hydrophones))
     digest.update(json.dumps([installed_version(), assigned.detections.source, assigned.detections.clock_resets,
-                              sound_speed, bin_hours] + ([] if survey_sigma is None else [survey_sigma]),
+                              sound_speed, bin_hours] + ([] if survey_sigma is None else [survey_sigma])
+                             + ([] if take_seen else ["said"]),
                              default=_plain).encode())
     for array in series or ():
         digest.update(np.ascontiguousarray(array, float).tobytes())
@@ -93,7 +94,7 @@ def _read(entry: Path) -> tuple[SyncOutcome, dict[str, Any]]:
 
 def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, deployments, sound_speed: float | None,
                       series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
-                      survey_sigma: float | None = None):
+                      survey_sigma: float | None = None, take_seen: bool = True):
     """:func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks`, its synchronisation taken from ``resume``
     where a run of the same output kept it for what it reads (:func:`clocks_key`), else made and kept there.
 
@@ -103,8 +104,9 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
         As :func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks` (a refusal is never kept).
     """
     if resume is None or sync_dir is not None:
-        return study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours, notes, survey_sigma)
-    key = clocks_key(assigned, sound_speed, series, bin_hours, survey_sigma)
+        return study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours, notes, survey_sigma,
+                            take_seen)
+    key = clocks_key(assigned, sound_speed, series, bin_hours, survey_sigma, take_seen)
     kept = resume.fetch(key, _read)
     if kept is not None:
         resume.taken.append("the synchronisation")
@@ -112,7 +114,7 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
         notes.extend(outcome.summary.get("warnings", []))
         return offsets_clocks(outcome.offsets), assigned.hydrophones, info, outcome
     clocks, table, info, outcome = study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours,
-                                                notes, survey_sigma)
+                                                notes, survey_sigma, take_seen)
     if outcome is not None:
         resume.store(key, lambda entry: _write(entry, outcome, info))
     return clocks, table, info, outcome

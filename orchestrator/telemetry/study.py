@@ -311,7 +311,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         survey's)."""
         scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
-                                                               series, bin_hours, notes, scored)
+                                                               series, bin_hours, notes, scored, not refine_positions)
         taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
         scored = taken if survey is None else survey
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)

@@ -240,3 +240,16 @@ def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
     summary = refined.summary["positions"]
     assert summary["kept"] and summary["clock_offset_knots"] == 7, summary
     assert _rms(sim, refined) <= 2.5 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))
+
+
+def test_the_survey_error_a_study_takes():
+    """The stated error wins (0: none, the positions exact); else, without the refinement, the error the
+    synchronisation saw and took; else none."""
+    from sblsim.orchestrator.telemetry.study_clocks import taken_survey
+
+    seen = {"survey_sigma_m": 2.39, "survey_sigma_from": "seen"}
+    assert taken_survey(None, False, seen) == 2.39
+    assert taken_survey(1.5, False, seen) == 1.5 and taken_survey(0.0, False, seen) is None
+    assert taken_survey(None, True, seen) is None  # the refinement's prior is the survey's
+    assert taken_survey(None, False, {"survey_sigma_m": 1.0, "survey_sigma_from": "stated"}) is None
+    assert taken_survey(None, False, {"source": "given"}) is None  # clocks from a folder: nothing seen here
