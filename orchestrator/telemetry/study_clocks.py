@@ -15,6 +15,7 @@ from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
+from sblsim.orchestrator.sync.taken_survey import folder_survey
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
@@ -39,10 +40,12 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         refined = read_positions(sync_dir)
         table, _ = with_positions(table, refined)
         missing = sorted(set(table["receiver"]) - set(clocks.receivers))
+        taken = folder_survey(sync_dir)  # the survey error its synchronisation saw and took, as one made here would
         return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
                                "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
-                               "positions": "refined (positions.csv)" if refined is not None else "the table's"}, None
+                               "positions": "refined (positions.csv)" if refined is not None else "the table's"} | (
+            {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}), None
     rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:

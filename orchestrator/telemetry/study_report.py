@@ -39,7 +39,9 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         seen = survey_line(c.get("survey_error"), c.get("survey_sigma_m"), c.get("survey_sigma_from"))
         out.extend([f"  {seen}"] if seen else [])
     elif c["source"] == "given":
-        out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})")
+        out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})" + (
+            f"; the survey error its synchronisation saw taken in every σ: {c['survey_sigma_m']:.3g} m per axis"
+            if c.get("survey_sigma_from") == "seen" else ""))
     elif "one receiver" in c["source"]:
         out.append("  clock taken as logged (one receiver: no other to synchronise it against)")
     elif "too coarse" in c["source"]:

@@ -303,7 +303,7 @@ def test_the_survey_error_the_synchronisation_sees_is_taken_where_none_is_stated
     synchronisation sees one in its residuals and takes it (``clocks.survey_sigma_from`` ``"seen"``), so the study
     is the one made with that error stated (``reference_tags.csv`` and ``tracks.csv`` the same), and differs from
     the study with ``survey_sigma=0`` (the positions taken as exact: the tracks' places the same, their σ smaller,
-    no survey term)."""
+    no survey term); given that synchronisation as a folder (``sync``), the study takes the error it took."""
     sim = simulate_study(n_receivers=9, n_tags=1, days=0.25, redeployed=0, seed=4)
     files = sim.write(tmp_path / "in", "vue")
     off = sim.positions[:, :2] + 2.0 * np.random.default_rng(11).normal(size=(len(sim.positions), 2))
@@ -341,3 +341,9 @@ def test_the_survey_error_the_synchronisation_sees_is_taken_where_none_is_stated
     tags = _read(tmp_path / "exact", "tags.csv").set_index("tag")
     summary = json.loads((tmp_path / "exact" / tags.loc[refs[0], "folder"] / "summary.json").read_text())
     assert "survey" not in summary["motion"]["consider_terms"]
+    # given the default study's synchronisation as a folder (--sync DIR): the error it took, taken again
+    given = run_study(files["detections"], files["deployments"], files["tags"], workdir=tmp_path / "given",
+                      sync=tmp_path / "default" / "sync", chosen=chosen, workers=1)
+    assert given.summary["clocks"]["survey_sigma_from"] == "seen" and given.summary["clocks"]["survey_sigma_m"] == seen
+    write_study(given, tmp_path / "given")
+    pd.testing.assert_frame_equal(_read(tmp_path / "given", "tracks.csv"), taken)
