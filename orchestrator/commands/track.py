@@ -153,14 +153,12 @@ def track(detections: str | Path | Sequence[str | Path], *, receivers: str | Pat
         the deepest ``bottom_depth`` of the deployments that heard the tag, where the deployments give it
         (``summary["water_depth"]``).
     force_interval : bool
-        Take a tag's stated interval (the sheet's) where its detections contradict it as a whole: a note says how
-        many detections it drops; without it such a tag is a refused row of ``tags.csv`` naming the interval its
-        detections show.
+        Take a tag's stated interval (the sheet's) where its detections contradict it as a whole (a note says how
+        many detections it drops); without it such a tag is a refused row of ``tags.csv`` naming the interval.
     refine_positions, survey_sigma : bool, float
-        Refine the receivers' positions from the study's pings, tracking again on them where that helps
-        (:mod:`sblsim.orchestrator.telemetry.study_positions`); the survey's σ per axis [m]: with the refinement
-        its prior in [0.01, 1000], 3 by default; without, the survey's stated error in every σ, in [0, 1000] (0: the
-        positions taken as exact; default: the error the synchronisation made here sees, taken where seen).
+        Refine the receivers' positions from the study's pings (:mod:`sblsim.orchestrator.telemetry.study_positions`);
+        the survey's σ per axis [m]: the refinement's prior in [0.01, 1000], 3 by default; without, the stated error
+        in every σ in [0, 1000] (0: the positions exact; default: the error the synchronisation sees, where seen).
     out : str or Path, optional
         Write the study's files there (``study.json``, ``tracks.csv``, ``tags.csv``, ``receivers.csv``,
         ``reference_tags.csv``, ``tracks.geojson``, ``map.png``, ``report.html`` with ``detections_daily.csv``,
