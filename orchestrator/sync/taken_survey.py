@@ -18,12 +18,11 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.arguments import real_argument
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.readers.cells import read_text
+from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 
 #: The largest ``sync.json`` read [bytes] and its most lines (a season's offsets per receiver and bin: a few MB).
 MAX_SYNC_JSON_BYTES = 64 * 2**20
 MAX_SYNC_JSON_LINES = 5_000_000
-#: The survey error's range [m per horizontal axis] (as ``--survey-sigma``'s without the refinement).
-SURVEY_RANGE = (0.0, 1000.0)
 
 
 def folder_survey(folder: Path | str) -> float | None:
@@ -34,7 +33,8 @@ def folder_survey(folder: Path | str) -> float | None:
     ------
     ModelError
         ``sync.json`` larger than :data:`MAX_SYNC_JSON_BYTES`, not JSON, not an object, or its ``survey_sigma_m``
-        not a number in :data:`SURVEY_RANGE` where it says it took one (one line).
+        not a number in a stated survey error's range
+        (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took one (one line).
     """
     folder = Path(folder)
     path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
@@ -50,7 +50,7 @@ def folder_survey(folder: Path | str) -> float | None:
         raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
     if data.get("survey_sigma_from") != "seen":
         return None
-    return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_RANGE, "m")
+    return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_SIGMA_RANGE, "m")
 
 
-__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "SURVEY_RANGE", "folder_survey"]
+__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "folder_survey"]

@@ -24,18 +24,21 @@ MAX_WORKERS = 256
 
 
 def survey_sigma_argument(value: Any, refine: bool, where: str) -> float | None:
-    """The survey σ [m] checked, in :data:`SURVEY_SIGMA_RANGE`: with the refinement its prior (default
-    :data:`SURVEY_SIGMA`); without, the survey's stated error, from 0 (the positions taken as exact; default None:
-    the error the synchronisation's residuals show where seen, else exact).
+    """The survey σ [m] checked: with the refinement its prior, in :data:`SURVEY_SIGMA_RANGE` (default
+    :data:`SURVEY_SIGMA`); without, the survey's stated error, in a stated error's range from 0
+    (:data:`sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`; 0: the positions taken as exact;
+    default None: the error the synchronisation's residuals show where seen, else exact).
 
     Raises
     ------
     ConfigError
         Out of its range (one line naming ``where``).
     """
+    from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE as STATED_RANGE
+
     if value is None:
         return SURVEY_SIGMA if refine else None
-    return real_argument(value, where, SURVEY_SIGMA_RANGE[0] if refine else 0.0, SURVEY_SIGMA_RANGE[1], "m")
+    return real_argument(value, where, *(SURVEY_SIGMA_RANGE if refine else STATED_RANGE), "m")
 
 
 def _options(format: Any, crs: Any, frame: Any, tag: Any, bin_hours: Any, workers: Any, scheduler: Any,
