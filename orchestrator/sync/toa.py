@@ -18,7 +18,10 @@ and one between two segments (the stretch around the break) is set aside and cou
 receiver's time went back in the detections file's order, a detection takes a segment of its own clock part.
 
 A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
-replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so.
+replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so. One that stated no
+survey error took the one its residuals between receivers saw (``sync.json``'s ``survey_sigma_m``, ``survey_sigma_from``
+``seen``: :mod:`.taken_survey`): the matrix's ``receivers.csv`` carries it as each receiver's ``sigma_m``, so the
+tracker's σ hold it as a study given that folder does (``toa.json``'s ``survey_sigma_m``).
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from sblsim.orchestrator.store.read import read_any
 from sblsim.orchestrator.sync.clocks import Clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.declared import check_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning
+from sblsim.orchestrator.sync.taken_survey import folder_survey
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -71,7 +75,8 @@ class ToaOutcome:
     receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``),
     ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
     noise from the synchronisation (None where it gives none), ``clock_sigma`` (R,) [s] its clock offset's own
-    uncertainty (likewise)."""
+    uncertainty (likewise), ``survey_sigma`` [m per horizontal axis] the survey error the synchronisation saw and
+    took (None where it took none)."""
 
     toa: np.ndarray
     names: list[str]
@@ -82,6 +87,7 @@ class ToaOutcome:
     frame: Frame | None = None
     toa_sigma: np.ndarray | None = None
     clock_sigma: np.ndarray | None = None
+    survey_sigma: float | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -339,6 +345,9 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     if refined is not None:
         outcome.summary["positions"] = {"source": "the synchronisation's positions.csv (refined)",
                                         "receivers": moved}
+    else:  # the survey error the synchronisation saw and took, as a study given the folder takes it
+        outcome.survey_sigma = folder_survey(sync)
+        outcome.summary["survey_sigma_m"] = outcome.survey_sigma
     return outcome
 
 

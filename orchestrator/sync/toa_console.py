@@ -32,6 +32,10 @@ def run_lines(outcome, where: str) -> list[str]:
     if "positions" in s:
         lines.append(f"  receivers' positions: {s['positions']['receivers']} from the synchronisation's "
                      "positions.csv (refined)")
+    if outcome.survey_sigma is not None:
+        lines.append(f"  survey error the synchronisation saw in its residuals between receivers: "
+                     f"{outcome.survey_sigma:.3g} m per axis, taken as the survey's error in the tracker's σ "
+                     "(receivers.csv's sigma_m)")
     noise = s.get("toa_sigma_s")
     if noise:
         values = np.array(list(noise.values()))

@@ -17,7 +17,7 @@ from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
 from sblsim.orchestrator.sync.toa import build
 from sblsim.orchestrator.sync.toa_console import run_lines, say_warnings
-from sblsim.orchestrator.tracks.options import ping_type_arguments
+from sblsim.orchestrator.tracks.options import geometry_arguments, ping_type_arguments
 
 #: ``sblsim replay --format``'s names of raw detections (``detections``: read from the file's first line).
 REPLAY_FORMATS = {"detections": None, **{f: f for f in DETECTION_FORMATS}}
@@ -28,12 +28,14 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     """``sblsim replay DETECTIONS --format detections|yaps|vue --receivers HYDROPHONES --sync DIR --tag ID``: the
     tag's matrix built as ``sblsim toa`` builds it (its lines printed), written with its receivers into a temporary
     folder (named by the tag, so the track's default folder is ``results/track_TAG``), and yielded as the arguments
-    of ``replay --format toa`` on them; the folder is removed when the replay ends.
+    of ``replay --format toa`` on them; the folder is removed when the replay ends. The survey error the
+    synchronisation saw and took is each receiver's ``sigma_m`` there (the tracker's σ hold it, as a study given
+    that folder), unless ``--survey-sigma`` states another (0: the positions as exact).
 
     Raises
     ------
     ConfigError, ModelError
-        ``--sync``, ``--tag`` or ``--receivers`` missing; what
+        ``--sync``, ``--tag`` or ``--receivers`` missing, ``--survey-sigma`` out of its range; what
         :func:`~sblsim.orchestrator.sync.toa.build` refuses.
     """
     missing = [o for o, v in (("--receivers", args.receivers), ("--sync", args.sync), ("--tag", args.tag)) if v is None]
@@ -43,8 +45,14 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     kind, interval, sequence = ping_type_arguments(args.ping_type, args.burst_interval, args.burst_sequence,
                                                    ("--ping-type", "--burst-interval", "--burst-sequence"),
                                                    stated=True, example="60:120")
+    stated = geometry_arguments(None, None, args.survey_sigma, ("--tag-depth", "--depth-sigma", "--survey-sigma"))
     outcome = build(args.log, args.receivers, args.sync, args.tag, REPLAY_FORMATS[args.format], kind, interval,
                     sequence, args.crs, args.frame, args.force_interval)
+    seen = outcome.survey_sigma
+    if stated["survey_sigma"] is not None and seen is not None:  # the error stated in place of the one seen
+        outcome.survey_sigma = outcome.summary["survey_sigma_m"] = None
+        print(f"note: --survey-sigma {stated['survey_sigma']:g} m stated in place of the survey error the "
+              f"synchronisation saw ({seen:.3g} m per axis)", file=sys.stderr)
     for line in run_lines(outcome, ""):
         print(line, flush=True)
     say_warnings(outcome.summary)

@@ -256,6 +256,78 @@ def test_replay_of_raw_detections_is_toa_then_the_tracker(tmp_path, capsys, arra
     assert "times of arrival of tag T1" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("said, taken", [("seen", 2.2), ("stated", None)])
+def test_the_survey_error_a_synchronisation_took_is_each_receivers_sigma_m(tmp_path, capsys, array, said, taken):
+    """A synchronisation that took the survey error it saw (``sync.json``: ``survey_sigma_from`` ``seen``) gives it
+    to the matrix's receivers (``receivers.csv``'s ``sigma_m``, which the tracker's σ take) and says so; one the
+    user stated is not taken again (the user states it to the tracker)."""
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+
+    detections, hydrophones, sync = _case(tmp_path, array)
+    (sync / "sync.json").write_text(json.dumps({"survey_sigma_m": 2.2, "survey_sigma_from": said}))
+    assert main(["toa", str(detections), "--receivers", str(hydrophones), "--sync", str(sync), "--tag", "T1",
+                 "--out", str(tmp_path / "toa")]) == 0
+    table = read_receivers(tmp_path / "toa" / "receivers.csv")
+    printed = capsys.readouterr().out
+    if taken is None:
+        assert table.sigma is None and "survey error" not in printed
+    else:
+        assert np.array_equal(table.sigma, np.full(len(table.names), taken))
+        assert "survey error the synchronisation saw in its residuals between receivers: 2.2 m per axis" in printed
+    assert json.loads((tmp_path / "toa" / "toa.json").read_text())["survey_sigma_m"] == taken
+
+
+@pytest.mark.parametrize("stated", [None, "0", "1.5"])
+def test_replay_of_raw_detections_takes_the_error_seen_unless_one_is_stated(tmp_path, capsys, array, stated):
+    """``replay --format detections --sync DIR``: the matrix it tracks carries the error the folder's
+    synchronisation saw (``sigma_m``), as ``sblsim toa``'s does; ``--survey-sigma`` states another in its place
+    (the tracker then takes it for every receiver without a ``sigma_m``: none), said in a note."""
+    from sblsim.orchestrator.cli import _parser
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.tracks.replay_detections import replay_matrix
+
+    detections, hydrophones, sync = _case(tmp_path, array)
+    (sync / "sync.json").write_text(json.dumps({"survey_sigma_m": 2.2, "survey_sigma_from": "seen"}))
+    argv = ["replay", str(detections), "--format", "detections", "--receivers", str(hydrophones), "--sync",
+            str(sync), "--tag", "T1"] + ([] if stated is None else ["--survey-sigma", stated])
+    with replay_matrix(_parser().parse_args(argv)) as toa_args:
+        table = read_receivers(toa_args.receivers)
+    err = capsys.readouterr().err
+    if stated is None:
+        assert np.array_equal(table.sigma, np.full(len(table.names), 2.2)) and "stated in place" not in err
+    else:
+        assert table.sigma is None and toa_args.survey_sigma == float(stated)
+        assert f"--survey-sigma {float(stated):g} m stated in place of the survey error the synchronisation saw " \
+               "(2.2 m per axis)" in err
+
+
+@pytest.mark.slow
+def test_replay_tracks_with_the_error_seen_as_with_it_stated(tmp_path, array):
+    """The error a synchronisation took, tracked from raw detections: the same track and σ as the same replay with
+    it stated (``--survey-sigma``), the same places with larger σ than with the positions exact (0)."""
+    detections, hydrophones, sync = _case(tmp_path, array)
+    (sync / "sync.json").write_text(json.dumps({"survey_sigma_m": 2.2, "survey_sigma_from": "seen"}))
+    common = ["replay", str(detections), "--format", "detections", "--sync", str(sync), "--tag", "T1",
+              "--receivers", str(hydrophones), "--sound-speed", "1480", "--acceleration-psd", "0.01"]
+    for name, extra in (("seen", []), ("stated", ["--survey-sigma", "2.2"]), ("exact", ["--survey-sigma", "0"])):
+        assert main([*common, *extra, "--out", str(tmp_path / name)]) == 0
+    seen, stated, exact = (pd.read_csv(tmp_path / f / "track.csv") for f in ("seen", "stated", "exact"))
+    pd.testing.assert_frame_equal(seen, stated)
+    sigmas = [c for c in seen.columns if c.startswith("sigma")]
+    assert sigmas and np.allclose(seen[["x", "y"]], exact[["x", "y"]])
+    assert (seen[sigmas].to_numpy() > exact[sigmas].to_numpy()).all()
+
+
+def test_replay_refuses_a_survey_sigma_out_of_range_before_reading(tmp_path, capsys, array):
+    detections, hydrophones, sync = _case(tmp_path, array)
+    code = main(["replay", str(detections), "--format", "detections", "--receivers", str(hydrophones), "--sync",
+                 str(sync), "--tag", "T1", "--survey-sigma", "-1", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--survey-sigma" in err[0], err
+    assert "times of arrival" not in captured.out and not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("args, found", [
     (["--format", "detections", "--tag", "T1"], "--sync: required with --format detections"),
     (["--format", "toa", "--tag", "T1", "--receivers", "x.csv"],
