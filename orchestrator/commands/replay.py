@@ -158,7 +158,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "only with a depth (--tag-depth or a depth_m column)")
     p.add_argument("--survey-sigma", type=float, default=None, metavar="M",
                    help="--format toa: the receivers' survey error per axis [m] in [0, 1000], for those without a "
-                        "sigma_m column, in the fix's and the smoother's covariances")
+                        "sigma_m column, in the fix's and the smoother's covariances; raw detections: every "
+                        "receiver's, in place of the one the synchronisation saw (0: the positions as exact)")
     p.add_argument("--motion", choices=MOTIONS, default=None,
                    help="--format toa: moving (default) or stationary (a sync or reference tag: one position for all "
                         "pings)")

@@ -20,7 +20,8 @@ def survey_line(seen: dict | None, stated: float | dict | None, source: str | No
         return (f"survey error not seen in the synchronisation's residuals between receivers ({said}: their excess "
                 f"over the arrivals' noise {seen['excess_z']:.2g} standard deviations, below {seen['z_seen']:g})")
     if source == "seen":
-        given = "taken as the survey's error in every σ: --survey-sigma M states another, 0 the positions as exact"
+        given = ("taken as the survey's error in every σ: --survey-sigma M states another, 0 the positions as exact, "
+                 "--refine-positions refines them")
     elif stated is None:
         given = f"the positions taken as exact: --survey-sigma {seen['survey_sigma_m']:.3g} states it in every σ"
     else:

@@ -143,6 +143,6 @@ def test_the_console_line_says_where_the_error_seen_was_taken():
             "degrees": 45, "z_seen": 3.0}
     taken = survey_line(seen, 2.41, "seen")
     assert "2.41 ± 0.47 m per axis" in taken and "taken as the survey's error in every σ" in taken
-    assert "0 the positions as exact" in taken
+    assert "0 the positions as exact, --refine-positions refines them" in taken
     assert survey_line(seen, 0.0, "stated").endswith("stated: 0 m (the positions taken as exact))")
     assert survey_line(seen, 1.0, "stated").endswith("stated: 1 m)")
