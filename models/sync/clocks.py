@@ -65,6 +65,11 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.selected_inversion import SelectedCovariance, selected_inverse
 
+#: The refusal where the clocks' normal equations are singular (a clock, or the sound speed, that the arrivals kept
+#: leave free: a sync tag left out, or rejections, can leave a receiver's bin without an arrival tying it).
+SINGULAR = ("sync: the clocks' normal equations are singular (a clock or the sound speed that the arrivals kept leave "
+            "undetermined); allowed: sync-tag arrivals that tie every synchronised receiver's clock in every bin")
+
 #: The most unknowns whose covariance is a dense inverse (2000² doubles, 32 MB); beyond,
 #: :func:`~sblsim.models.sync.selected_inversion.selected_inverse`.
 DENSE_LIMIT = 2000
@@ -167,7 +172,7 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
     Raises
     ------
     ModelError
-        Fewer than two synchronised receivers, or no arrival used.
+        Fewer than two synchronised receivers, no arrival used, or normal equations singular (:data:`SINGULAR`).
     """
     n_receivers = len(synchronised)
     used = used & synchronised[receiver]
@@ -261,7 +266,10 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
         rhs = B.T @ (w * y) - NEB.T @ (ety / np.maximum(D, 1e-300))
         cov = shift_cov = None
         if covariance and p <= dense_limit:
-            factor = scipy.linalg.cho_factor(S.toarray(), lower=True, check_finite=False)
+            try:
+                factor = scipy.linalg.cho_factor(S.toarray(), lower=True, check_finite=False)
+            except np.linalg.LinAlgError:  # not positive definite: a clock the arrivals leave free
+                raise ModelError(SINGULAR) from None
             x = scipy.linalg.cho_solve(factor, rhs, check_finite=False)
             full = scipy.linalg.cho_solve(factor, np.eye(p), check_finite=False)
             cov = SelectedCovariance(np.diag(full)[:n_knots].copy(), full[pairs[:, 0], pairs[:, 1]],
@@ -269,12 +277,18 @@ def fit_clocks(receiver: np.ndarray, emission: np.ndarray, time: np.ndarray, dis
             if shifts:
                 shift_cov = full[first:, first:]
         elif p > dense_limit:  # the block-tridiagonal factorisation (faster than splu's at this size)
-            x, selected = selected_inverse(S, n_knots, order, rhs, pairs if covariance else None)
+            try:
+                x, selected = selected_inverse(S, n_knots, order, rhs, pairs if covariance else None)
+            except np.linalg.LinAlgError:
+                raise ModelError(SINGULAR) from None
             cov = selected if covariance else None
             if shifts:
                 shift_cov = selected.border[int(estimate):, int(estimate):]
         else:
-            lu = scipy.sparse.linalg.splu(S)
+            try:
+                lu = scipy.sparse.linalg.splu(S)
+            except RuntimeError:  # SuperLU: "Factor is exactly singular"
+                raise ModelError(SINGULAR) from None
             x = lu.solve(rhs)
             if shifts:
                 shift_cov = lu.solve(np.eye(p)[:, first:])[first:]

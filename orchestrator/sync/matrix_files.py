@@ -64,7 +64,7 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     whatever the receivers' names: the column's name is not a number). ``receivers.csv`` has each receiver's
     timing noise (``toa_sigma_s`` [s]) and its clock offset's uncertainty (``clock_sigma_s`` [s]) where the
     synchronisation gives them, and each one's survey error (``sigma_m`` [m per horizontal axis]) where the
-    synchronisation took the one it saw (``outcome.survey_sigma``)."""
+    synchronisation took the one it saw, or a study's refined positions give each one's (``outcome.survey_sigma``)."""
     frame = pd.DataFrame(outcome.toa, columns=outcome.names)
     if depth is not None:
         frame.insert(0, DEPTH_COLUMN, depth)
@@ -80,7 +80,7 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     if outcome.clock_sigma is not None:
         table["clock_sigma_s"] = [f"{v:.6g}" for v in outcome.clock_sigma]
     if outcome.survey_sigma is not None:
-        table["sigma_m"] = float(outcome.survey_sigma)
+        table["sigma_m"] = np.broadcast_to(np.asarray(outcome.survey_sigma, float), (len(outcome.names),))
     table.to_csv(receivers, index=False, float_format="%.4f")
     return toa, receivers
 

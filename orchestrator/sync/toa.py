@@ -76,7 +76,7 @@ class ToaOutcome:
     ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
     noise from the synchronisation (None where it gives none), ``clock_sigma`` (R,) [s] its clock offset's own
     uncertainty (likewise), ``survey_sigma`` [m per horizontal axis] the survey error the synchronisation saw and
-    took (None where it took none)."""
+    took, or (R,) each receiver's position's error (a study on refined positions; None where none)."""
 
     toa: np.ndarray
     names: list[str]
@@ -87,7 +87,7 @@ class ToaOutcome:
     frame: Frame | None = None
     toa_sigma: np.ndarray | None = None
     clock_sigma: np.ndarray | None = None
-    survey_sigma: float | None = None
+    survey_sigma: float | np.ndarray | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:

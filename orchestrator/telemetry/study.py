@@ -307,8 +307,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
 
     def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``; ``survey``
-        each receiver's position's error [m per axis] in the reference tags' and sync tags' scores (else the stated
-        survey's)."""
+        each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
+        track (else the stated survey's)."""
         scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored, not refine_positions)
@@ -355,6 +355,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                         "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
                 matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
                                                   spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
+                if survey is not None:  # refined positions: each one's own error in the track's σ (sigma_m)
+                    matrix.survey_sigma = np.array([survey[n] for n in matrix.names], float)
                 said = [f"tag {key}: {matrix.summary['interval_warning']}"] if matrix.summary.get(
                     "interval_warning") else []
                 heard = np.isfinite(matrix.toa).sum(axis=1)

@@ -156,20 +156,34 @@ def simulated(tmp_path_factory):
     return sim, true, errors, runs, folder
 
 
-def _rms(sim, result) -> float:
-    """The tracks' 2-D RMS error [m] against the simulated truth over their rows not flagged (the truth on the
-    reference receiver's clock, which the synchronisation takes as UTC)."""
+def _errors(sim, result) -> tuple[np.ndarray, np.ndarray]:
+    """The tracks' rows not flagged against the simulated truth (on the reference receiver's clock, which the
+    synchronisation takes as UTC): their errors (n, 2) [m] and their ``sigma_x``, ``sigma_y`` (n, 2) [m]."""
     reference = result.summary["clocks"]["reference_receiver"]
     k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
-    errors = []
+    errors, sigmas = [], []
     for tag, rows in result.tracks.groupby("tag"):
         truth = sim.truth[tag]
         on = sim.clock_time(k, truth["tau"].to_numpy())
         ok = (rows["quality"] == "ok").to_numpy()
         epoch = rows["epoch_s"].to_numpy()[ok]
-        errors.append(np.hypot(rows["x"].to_numpy()[ok] - np.interp(epoch, on, truth["x"]),
-                               rows["y"].to_numpy()[ok] - np.interp(epoch, on, truth["y"])))
-    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
+        errors.append(np.c_[rows["x"].to_numpy()[ok] - np.interp(epoch, on, truth["x"]),
+                            rows["y"].to_numpy()[ok] - np.interp(epoch, on, truth["y"])])
+        sigmas.append(rows[["sigma_x", "sigma_y"]].to_numpy()[ok])
+    return np.concatenate(errors), np.concatenate(sigmas)
+
+
+def _rms(sim, result) -> float:
+    """The tracks' 2-D RMS error [m] against the simulated truth over their rows not flagged."""
+    errors, _ = _errors(sim, result)
+    return float(np.sqrt(np.mean(np.sum(errors ** 2, axis=1))))
+
+
+def _nees(sim, result) -> float:
+    """The tracks' mean 2-D NEES against the simulated truth over their rows not flagged, on each row's
+    ``sigma_x``, ``sigma_y``."""
+    errors, sigmas = _errors(sim, result)
+    return float(np.mean(np.sum((errors / sigmas) ** 2, axis=1)))
 
 
 @pytest.mark.slow
@@ -240,6 +254,9 @@ def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
     summary = refined.summary["positions"]
     assert summary["kept"] and summary["clock_offset_knots"] == 7, summary
     assert _rms(sim, refined) <= 2.5 * _rms(sim, right), (_rms(sim, refined), _rms(sim, right))
+    # the refined positions' own errors in the tracks' σ: their NEES a consistent one's (10.3 without them)
+    assert 1.0 <= _nees(sim, refined) <= 4.5 and 1.0 <= _nees(sim, right) <= 3.0, (_nees(sim, refined),
+                                                                                    _nees(sim, right))
 
 
 def test_the_survey_error_a_study_takes():

@@ -301,6 +301,24 @@ def test_replay_of_raw_detections_takes_the_error_seen_unless_one_is_stated(tmp_
                "(2.2 m per axis)" in err
 
 
+@pytest.mark.parametrize("survey", [None, 1.5, np.array([0.4, 3.0])])
+def test_receivers_csv_carries_each_receivers_survey_error(tmp_path, survey):
+    """``sigma_m``: one error for every receiver (the synchronisation's seen), each receiver's own (a study's refined
+    positions), or none; read back by the receivers' reader as the tracker reads it."""
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.sync.matrix_files import write_matrix
+    from sblsim.orchestrator.sync.toa import ToaOutcome
+
+    matrix = ToaOutcome(np.array([[0.1, 0.2], [10.1, 10.3]]), ["A", "B"], np.array([[0.0, 0.0], [100.0, 0.0]]),
+                        pd.DataFrame({"ping": [0, 1]}), {"tag": "T9"}, EPOCH, survey_sigma=survey)
+    _, receivers = write_matrix(matrix, tmp_path)
+    read = read_receivers(receivers).sigma
+    if survey is None:
+        assert read is None
+    else:
+        np.testing.assert_array_equal(read, np.broadcast_to(survey, (2,)))
+
+
 @pytest.mark.slow
 def test_replay_tracks_with_the_error_seen_as_with_it_stated(tmp_path, array):
     """The error a synchronisation took, tracked from raw detections: the same track and σ as the same replay with
