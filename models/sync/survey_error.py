@@ -192,8 +192,10 @@ def _robust_variance(square: np.ndarray, parts: np.ndarray, own: np.ndarray) -> 
     square, parts, own = square[keep], parts[keep], own[keep]
     half = float(chi2.ppf(0.5, 1))
 
-    def excess(v: float) -> float:
-        return float(np.median(square / (v * parts + own))) - half
+    def excess(v: float) -> float:  # a pair of no noise at v = 0: infinite where its residual is not 0
+        variance = v * parts + own
+        ratio = np.divide(square, variance, out=np.where(square > 0, np.inf, 0.0), where=variance > 0)
+        return float(np.median(ratio)) - half
 
     if not len(square) or excess(0.0) <= 0:
         return 0.0

@@ -10,7 +10,8 @@ import math
 def survey_line(seen: dict | None, stated: float | dict | None, source: str | None = None) -> str | None:
     """The console's line of the survey error a synchronisation saw (``seen``: ``sync.json``'s ``survey_error``;
     ``stated``: its ``survey_sigma_m``, the survey's error in its σ; ``source``: its ``survey_sigma_from``,
-    ``"seen"`` where the error seen was taken as the survey's); None where no pair was left."""
+    ``"seen"`` where the error seen was taken as the survey's, ``"refined"`` a study whose positions are refined
+    next); None where no pair was left."""
     if not seen or not seen.get("pairs") or seen.get("excess_z") is None or not math.isfinite(seen["excess_z"]):
         return None
     aside = seen.get("pairs_set_aside") or 0
@@ -19,7 +20,10 @@ def survey_line(seen: dict | None, stated: float | dict | None, source: str | No
     if not seen["seen"]:
         return (f"survey error not seen in the synchronisation's residuals between receivers ({said}: their excess "
                 f"over the arrivals' noise {seen['excess_z']:.2g} standard deviations, below {seen['z_seen']:g})")
-    if source == "seen":
+    if source == "refined":
+        given = ("not taken: --refine-positions refines the positions from the pings (its lines below), each refined "
+                 "one's own error then in every σ")
+    elif source == "seen":
         given = ("taken as the survey's error in every σ: --survey-sigma M states another, 0 the positions as exact, "
                  "--refine-positions refines them")
     elif stated is None:

@@ -36,7 +36,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                                                                       if c["not_synchronised"] else "")
                    + (f"; in {c['windows']['count']} windows of {c['windows']['days']:g} days" if "windows" in c
                       else ""))
-        seen = survey_line(c.get("survey_error"), c.get("survey_sigma_m"), c.get("survey_sigma_from"))
+        seen = survey_line(c.get("survey_error"), c.get("survey_sigma_m"),
+                           "refined" if options.get("refine_positions") else c.get("survey_sigma_from"))
         out.extend([f"  {seen}"] if seen else [])
     elif c["source"] == "given":
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})" + (

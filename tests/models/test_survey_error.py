@@ -107,3 +107,18 @@ def test_bad_pairs_are_refused():
         survey_error(np.zeros(len(home)), count, scale, home, home, tag, positions)
     few = survey_error(np.zeros(2), np.full(2, 20.0), np.ones(2), listener[:2], home[:2], tag[:2], positions)
     assert not few.seen and np.isnan(few.sigma) and few.degrees == 0
+
+
+def test_pairs_without_noise_are_weighed_without_a_division_by_zero():
+    """A pair whose noise is 0 (its arrivals' variance nothing at v = 0): its ratio is infinite where its residual
+    is not 0 and 0 where it is, with no warning; the variance found is the one the other pairs give."""
+    import warnings
+
+    from sblsim.models.sync.survey_error import _robust_variance
+
+    square, parts = np.array([4.0, 4.0, 4.0, 0.0]), np.ones(4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        found = _robust_variance(square, parts, np.zeros(4))
+        with_noise = _robust_variance(square, parts, np.full(4, 1e-30))
+    assert found == pytest.approx(with_noise, rel=1e-6) and found > 0

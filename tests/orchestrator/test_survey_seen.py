@@ -146,3 +146,5 @@ def test_the_console_line_says_where_the_error_seen_was_taken():
     assert "0 the positions as exact, --refine-positions refines them" in taken
     assert survey_line(seen, 0.0, "stated").endswith("stated: 0 m (the positions taken as exact))")
     assert survey_line(seen, 1.0, "stated").endswith("stated: 1 m)")
+    refined = survey_line(seen, None, "refined")  # a study whose positions are refined next: not taken
+    assert "not taken: --refine-positions refines the positions" in refined and "taken as" not in refined
