@@ -356,7 +356,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
                                                   spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
                 if survey is not None:  # refined positions: each one's own error in the track's σ (sigma_m)
-                    matrix.survey_sigma = np.array([survey[n] for n in matrix.names], float)
+                    matrix.survey_sigma = np.array([survey.get(n, max(survey.values())) for n in matrix.names])
                 said = [f"tag {key}: {matrix.summary['interval_warning']}"] if matrix.summary.get(
                     "interval_warning") else []
                 heard = np.isfinite(matrix.toa).sum(axis=1)
