@@ -46,12 +46,8 @@ def _scored(sim, result) -> dict:
     k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
     errors, nees = [], []
     for tag, rows in result.tracks.groupby("tag"):
-        truth = sim.truth[tag]
-        on_clock = sim.clock_time(k, truth["tau"].to_numpy())
         ok = (rows["quality"] == "ok").to_numpy()
-        epoch = rows["epoch_s"].to_numpy()[ok]
-        ex = rows["x"].to_numpy()[ok] - np.interp(epoch, on_clock, truth["x"])
-        ey = rows["y"].to_numpy()[ok] - np.interp(epoch, on_clock, truth["y"])
+        ex, ey = (rows[["x", "y"]].to_numpy()[ok] - sim.truth_at(tag, rows["epoch_s"].to_numpy()[ok], k)).T
         errors.append(np.hypot(ex, ey))
         nees.append((ex / rows["sigma_x"].to_numpy()[ok]) ** 2 + (ey / rows["sigma_y"].to_numpy()[ok]) ** 2)
     e, n = np.concatenate(errors), np.concatenate(nees)

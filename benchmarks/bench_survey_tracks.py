@@ -33,11 +33,8 @@ def _scored(study, sim) -> dict:
     for tag in study.tags.itertuples():
         if tag.status != "tracked":
             continue
-        truth = sim.truth[tag.tag]
-        on_clock = sim.clock_time(k, truth["tau"].to_numpy())
         mine = study.tracks[study.tracks["tag"] == tag.tag]
-        ex = mine["x"].to_numpy() - np.interp(mine["epoch_s"], on_clock, truth["x"])
-        ey = mine["y"].to_numpy() - np.interp(mine["epoch_s"], on_clock, truth["y"])
+        ex, ey = (mine[["x", "y"]].to_numpy() - sim.truth_at(tag.tag, mine["epoch_s"], k)).T
         sx, sy = mine["sigma_x"].to_numpy(), mine["sigma_y"].to_numpy()
         nees.append((ex / sx) ** 2 + (ey / sy) ** 2)
         error.append(np.hypot(ex, ey))

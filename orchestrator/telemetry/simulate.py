@@ -88,6 +88,15 @@ class SimulatedStudy:
         a, b = self.clocks.loc[deployment, ["a", "b"]]
         return self.origin + tau + a + b * tau
 
+    def truth_at(self, tag: str, epoch: np.ndarray, deployment: int) -> np.ndarray:
+        """(n, 2) [m in the frame] animal ``tag``'s true position at the times ``epoch`` (n,) [s since 1970 UTC]
+        read on deployment ``deployment``'s clock (the reference receiver's: a synchronised study's UTC), its truth
+        interpolated linearly between its samples."""
+        truth = self.truth[tag]
+        on_clock = self.clock_time(deployment, truth["tau"].to_numpy())
+        epoch = np.asarray(epoch, float)
+        return np.c_[np.interp(epoch, on_clock, truth["x"]), np.interp(epoch, on_clock, truth["y"])]
+
     def write(self, folder: Path | str, format: str = "vue") -> dict[str, Path]:
         """Write the study's files into ``folder``: ``deployments.csv``, ``tags.csv`` (and each ``pbi`` tag's
         sequence), and ``detections.csv`` as a VUE export (``vue``), a Fathom CSV (``fathom``) or a GLATOS

@@ -360,12 +360,9 @@ def _nees(study, sim) -> np.ndarray:
     found = []
     for tag in study.tags.itertuples():
         assert tag.status == "tracked", tag.reason
-        truth = sim.truth[tag.tag]
-        on_clock = sim.clock_time(k, truth["tau"].to_numpy())
         rows = study.tracks[study.tracks["tag"] == tag.tag]
-        ex = rows["x"].to_numpy() - np.interp(rows["epoch_s"], on_clock, truth["x"])
-        ey = rows["y"].to_numpy() - np.interp(rows["epoch_s"], on_clock, truth["y"])
-        found.append((ex / rows["sigma_x"].to_numpy()) ** 2 + (ey / rows["sigma_y"].to_numpy()) ** 2)
+        error = rows[["x", "y"]].to_numpy() - sim.truth_at(tag.tag, rows["epoch_s"], k)
+        found.append(np.sum((error / rows[["sigma_x", "sigma_y"]].to_numpy()) ** 2, axis=1))
     return np.concatenate(found)
 
 

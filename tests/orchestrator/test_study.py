@@ -43,9 +43,7 @@ def _truth_at(sim, result, tag: str, epoch: np.ndarray) -> np.ndarray:
     synchronisation takes as UTC): the truth's true times read on that clock, interpolated."""
     reference = result.summary["clocks"]["reference_receiver"]
     k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
-    truth = sim.truth[tag]
-    on_reference = sim.clock_time(k, truth["tau"].to_numpy())
-    return np.c_[np.interp(epoch, on_reference, truth["x"]), np.interp(epoch, on_reference, truth["y"])]
+    return sim.truth_at(tag, epoch, k)
 
 
 @pytest.mark.slow
@@ -327,3 +325,20 @@ def test_worker_processes_and_a_dask_cluster_write_the_study_of_one_process(stud
     for tag in tags:
         for name in ("track.csv", "estimates.csv"):
             assert (many / "tags" / tag / name).read_bytes() == (one / "tags" / tag / name).read_bytes(), (tag, name)
+
+
+def test_the_simulated_truth_is_read_on_a_deployments_clock():
+    """``truth_at``: an animal's true samples at their times as deployment k's clock reads them, and half way between
+    two samples the mean of the two (its clock's offset and drift applied, not the true time)."""
+    sim = simulate_study(n_receivers=4, n_tags=1, days=0.02, redeployed=0, seed=3)
+    tag = next(iter(sim.truth))
+    truth = sim.truth[tag]
+    tau, xy = truth["tau"].to_numpy(), truth[["x", "y"]].to_numpy()
+    a, b = sim.clocks.loc[2, ["a", "b"]]
+    read = sim.origin + tau + a + b * tau  # deployment 2's clock at the true times
+    np.testing.assert_allclose(sim.truth_at(tag, read, 2), xy, rtol=0, atol=1e-6)
+    middle = 0.5 * (tau[:-1] + tau[1:])
+    np.testing.assert_allclose(sim.truth_at(tag, sim.origin + middle + a + b * middle, 2),
+                               0.5 * (xy[:-1] + xy[1:]), rtol=0, atol=1e-6)
+    unread = sim.truth_at(tag, sim.origin + middle, 2)  # the true times taken as the clock's: off by its offset
+    assert np.abs(unread - 0.5 * (xy[:-1] + xy[1:])).max() > 1e-3

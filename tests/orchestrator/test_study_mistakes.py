@@ -57,11 +57,7 @@ def _scores(sim, result):
     out = {}
     for tag, rows in result.tracks.groupby("tag"):
         rows = rows[rows["quality"] == "ok"]
-        truth = sim.truth[tag]
-        on_reference = sim.clock_time(k, truth["tau"].to_numpy())
-        e = rows["epoch_s"].to_numpy()
-        dx = rows["x"].to_numpy() - np.interp(e, on_reference, truth["x"])
-        dy = rows["y"].to_numpy() - np.interp(e, on_reference, truth["y"])
+        dx, dy = (rows[["x", "y"]].to_numpy() - sim.truth_at(tag, rows["epoch_s"].to_numpy(), k)).T
         out[tag] = (np.hypot(dx, dy), (dx / rows["sigma_x"]) ** 2 + (dy / rows["sigma_y"]) ** 2)
     return out
 

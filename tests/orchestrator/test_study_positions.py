@@ -163,12 +163,8 @@ def _errors(sim, result) -> tuple[np.ndarray, np.ndarray]:
     k = int(np.flatnonzero(result.receivers["receiver"].to_numpy() == reference)[0])
     errors, sigmas = [], []
     for tag, rows in result.tracks.groupby("tag"):
-        truth = sim.truth[tag]
-        on = sim.clock_time(k, truth["tau"].to_numpy())
         ok = (rows["quality"] == "ok").to_numpy()
-        epoch = rows["epoch_s"].to_numpy()[ok]
-        errors.append(np.c_[rows["x"].to_numpy()[ok] - np.interp(epoch, on, truth["x"]),
-                            rows["y"].to_numpy()[ok] - np.interp(epoch, on, truth["y"])])
+        errors.append(rows[["x", "y"]].to_numpy()[ok] - sim.truth_at(tag, rows["epoch_s"].to_numpy()[ok], k))
         sigmas.append(rows[["sigma_x", "sigma_y"]].to_numpy()[ok])
     return np.concatenate(errors), np.concatenate(sigmas)
 
