@@ -20,7 +20,7 @@ same times.
 
 A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
 (read the same way, :func:`read_positions`) replace the receivers table's ``x``, ``y`` of the receivers it lists
-(:func:`with_positions`).
+(:func:`with_positions`), and each one's error (:func:`read_position_sigmas`) goes with them.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from sblsim.orchestrator.readers.cells import numbers as _numbers
 from sblsim.orchestrator.readers.cells import pattern as _pattern
 from sblsim.orchestrator.readers.hydrophones import table as _table
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_EPOCH
+from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 
 #: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
 MAX_OFFSET_ROWS = 1_000_000
@@ -350,6 +351,34 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     return {n: (float(a), float(b)) for n, a, b in zip(serial, x, y)}
 
 
+def read_position_sigmas(folder: Path | str) -> dict[str, float] | None:
+    """Each receiver's position error [m per horizontal axis] in a synchronisation's folder whose positions were
+    refined (``positions.csv``'s ``position_sigma_m``: its posterior σ in the array's shape where refined, the
+    survey's where the table's position was kept), by its serial; None where the folder has no ``positions.csv``,
+    or one written before that column.
+
+    Raises
+    ------
+    ModelError
+        One line: a cell outside its pattern or range
+        (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`), a receiver twice.
+    """
+    path = _in_folder(Path(folder), "positions.csv")
+    if not path.exists():
+        return None
+    what = "sync"
+    body, lines, name, col = _columns(path, what, ("serial",), "sblsim sync --refine-positions' positions.csv",
+                                      ("position_sigma_m",))
+    if "position_sigma_m" not in col:
+        return None
+    serial = _pattern(body[col["serial"]], IDENTIFIER, what, name, lines, "serial",
+                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
+    sigma = _numbers(body[col["position_sigma_m"]], what, name, lines, "position_sigma_m", *SURVEY_SIGMA_RANGE,
+                     unit="m")
+    if len(set(serial)) != len(serial):
+        raise ModelError(f"{what}: {name!r}: a receiver is listed twice; allowed: one row per receiver")
+    return {n: float(v) for n, v in zip(serial, sigma)}
+
 def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] | None) -> tuple[pd.DataFrame, int]:
     """The receivers table (``receiver``, ``x``, ``y``, ...) with a synchronisation's refined horizontal positions
     (:func:`read_positions`; None: none) in place of the table's for the receivers it lists; and how many it moved."""
@@ -363,4 +392,4 @@ def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] 
 
 
 __all__ = ["Clocks", "MAX_OFFSET", "MAX_OFFSET_ROWS", "clocks_of", "logged_clocks", "offsets_clocks", "read_clocks",
-           "read_positions", "with_positions"]
+           "read_position_sigmas", "read_positions", "with_positions"]

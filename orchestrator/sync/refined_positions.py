@@ -14,9 +14,10 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clocks import Geometry
-from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, Identifiability, identify
+from sblsim.models.sync.identifiability import MAX_SIGMA_RATIO, Identifiability, identify, shape_sigma_ratio
 from sblsim.orchestrator.sync import segments
 from sblsim.orchestrator.sync.sync_tags import _fit_without
+from sblsim.orchestrator.sync.taken_survey import position_errors
 
 
 def _identify(fit: ClockFit, args: tuple, geometry: Geometry, positions: np.ndarray, names: list[str],
@@ -54,13 +55,19 @@ def _identify(fit: ClockFit, args: tuple, geometry: Geometry, positions: np.ndar
 
 
 def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: np.ndarray,
-               identified: Identifiability, tag_names: list[str]) -> pd.DataFrame:
+               identified: Identifiability, tag_names: list[str], survey_sigma: float) -> pd.DataFrame:
     """``positions.csv``: each receiver's refined horizontal position, the table's, the shift and its sigmas; a
     receiver the sync tags do not determine (``identified``; in the fit at the survey's prior like the others) or
     not synchronised keeps the table's (``refined`` false, its ``reason``; its sigmas NaN); ``sigma_ratio`` and
     ``sigma_ratio_without`` its posterior sigma in the array's shape over the survey's, with every sync tag and the
-    worst with one left out (``worst_tag``)."""
+    worst with one left out (``worst_tag``); ``position_sigma_m`` [m per axis] its position's error for a tracker
+    (:func:`~sblsim.orchestrator.sync.taken_survey.position_errors`: its posterior σ in the array's shape where
+    refined, the shape without the array's scale where the sound speed was fitted with the positions, which no
+    time of arrival tells apart and a track calibrating its own speed takes up too; the survey's ``survey_sigma``
+    where not refined)."""
     refined = linked & identified.determined
+    shape = identified.ratio if fit.slowness is None else shape_sigma_ratio(
+        positions[:, :2], fit.shift_covariance_all, survey_sigma, linked, scale=True)
     shift = np.where(refined[:, None], fit.shift, 0.0)
     cov = fit.shift_covariance
     ratio, without = identified.ratio, identified.ratio_without
@@ -81,7 +88,8 @@ def _positions(fit: ClockFit, positions: np.ndarray, names: list[str], linked: n
         "sigma_y_m": np.where(refined, np.sqrt(cov[:, 1, 1]), np.nan),
         "correlation_xy": np.where(refined, cov[:, 0, 1] / np.sqrt(cov[:, 0, 0] * cov[:, 1, 1]), np.nan),
         "refined": refined, "reason": np.where(refined, "", reason), "sigma_ratio": ratio,
-        "sigma_ratio_without": without, "worst_tag": worst})
+        "sigma_ratio_without": without, "worst_tag": worst,
+        "position_sigma_m": list(position_errors(names, shape, refined, survey_sigma).values())})
 
 
 def _loo(summary: dict[str, Any]) -> dict[str, Any] | None:
@@ -114,6 +122,7 @@ def _kept(refined, table, survey_sigma: float):
     positions[["x_m", "y_m"]] = positions[["table_x_m", "table_y_m"]].to_numpy()
     positions[["shift_x_m", "shift_y_m", "shift_m"]] = 0.0
     positions[["sigma_x_m", "sigma_y_m", "correlation_xy"]] = np.nan
+    positions["position_sigma_m"] = float(survey_sigma)
     table.positions = positions
     table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record}
     table.summary.setdefault("warnings", []).append(f"refine positions: {why}: the table's positions kept")

@@ -386,7 +386,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
                            width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
                            fits, table_sigma, windows)
-    refined = _positions(fit, positions, names, linked, identified, tag_names) if refine_positions else None
+    refined = _positions(fit, positions, names, linked, identified, tag_names, float(survey_sigma)) \
+        if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick
     reason = _reasons(np.select([duplicate, single, rows < 0, ~on, ~fit.kept], [1, 2, 3, 4, 5], 0))
     # every arrival's row made once the sync tags are scored (not held through their refits), on the fit's arrays

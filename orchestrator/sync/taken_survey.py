@@ -1,10 +1,15 @@
-"""The survey error a synchronisation's folder says it took (``sync.json``'s ``survey_sigma_m`` where its
-``survey_sigma_from`` is ``"seen"``: :func:`~sblsim.orchestrator.sync.run.synchronise` took the error its residuals
-between receivers showed), for a study given that folder as its clocks (``--sync DIR``): the same σ as the study
-that synchronises its own clocks.
+"""The receivers' position errors a synchronisation's folder says it took, for a study or a matrix given that folder
+as its clocks (``--sync DIR``): the same σ as where the synchronisation is made there.
 
-The file is read as anyone's: its size and lines bounded before it is read, JSON parsed (no code run, no path it
-names opened), the one number taken checked in its range; anything else in it is not read.
+- **Positions as surveyed** (:func:`folder_survey`): ``sync.json``'s ``survey_sigma_m`` where its
+  ``survey_sigma_from`` is ``"seen"`` (:func:`~sblsim.orchestrator.sync.run.synchronise` took the error its residuals
+  between receivers showed).
+- **Positions refined** (``--refine-positions``; :func:`folder_position_sigmas`): each receiver's own error
+  (:func:`position_errors`), written by the synchronisation as ``positions.csv``'s ``position_sigma_m``: its
+  posterior σ in the array's shape where refined, the refinement's prior where it kept the table's position.
+
+The files are read as anyone's: their size and lines bounded before they are read, JSON parsed (no code run, no path
+it names opened), the numbers taken checked in their ranges; anything else in them is not read.
 
 Units: metres [m].
 """
@@ -13,16 +18,42 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.arguments import real_argument
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.readers.cells import read_text
 from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
+from sblsim.orchestrator.sync.clocks import read_position_sigmas
 
 #: The largest ``sync.json`` read [bytes] and its most lines (a season's offsets per receiver and bin: a few MB).
 MAX_SYNC_JSON_BYTES = 64 * 2**20
 MAX_SYNC_JSON_LINES = 5_000_000
+
+
+def _sync_json(folder: Path) -> tuple[dict[str, Any], str] | None:
+    """A synchronisation's ``sync.json`` parsed, and how a message names it; None where the folder has none.
+
+    Raises
+    ------
+    ModelError
+        Larger than :data:`MAX_SYNC_JSON_BYTES`, not JSON, not an object (one line).
+    """
+    path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
+    if not path.is_file():
+        return None
+    shown = f"sync: {str(path)[:120]!r}"
+    text = read_text(path, "sync", MAX_SYNC_JSON_BYTES, MAX_SYNC_JSON_LINES)
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise ModelError(f"{shown} is not JSON ({str(exc)[:80]}); allowed: the sync.json sblsim sync writes") from None
+    if not isinstance(data, dict):
+        raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
+    return data, shown
 
 
 def folder_survey(folder: Path | str) -> float | None:
@@ -36,21 +67,40 @@ def folder_survey(folder: Path | str) -> float | None:
         not a number in a stated survey error's range
         (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took one (one line).
     """
-    folder = Path(folder)
-    path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
-    if not path.is_file():
+    read = _sync_json(Path(folder))
+    if read is None or read[0].get("survey_sigma_from") != "seen":
         return None
-    shown = f"sync: {str(path)[:120]!r}"
-    text = read_text(path, "sync", MAX_SYNC_JSON_BYTES, MAX_SYNC_JSON_LINES)
-    try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise ModelError(f"{shown} is not JSON ({str(exc)[:80]}); allowed: the sync.json sblsim sync writes") from None
-    if not isinstance(data, dict):
-        raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
-    if data.get("survey_sigma_from") != "seen":
-        return None
+    data, shown = read
     return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_SIGMA_RANGE, "m")
 
 
-__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "folder_survey"]
+def position_errors(names: Sequence[str], ratios: Sequence[float], refined: Sequence[bool],
+                    prior: float) -> dict[str, float]:
+    """Each receiver's position error on refined positions [m per horizontal axis], by its name: where ``refined``
+    its posterior σ in the array's shape (``ratios`` × ``prior``: the array's translation and rotation, which no time
+    of arrival tells, move a still tag and its receiver together); elsewhere the survey's ``prior`` (its position the
+    survey's)."""
+    sigma = np.where(np.asarray(refined, bool), np.asarray(ratios, float), 1.0) * float(prior)
+    return {str(n): float(v) for n, v in zip(names, sigma, strict=True)}
+
+
+def folder_position_sigmas(folder: Path | str, names: Sequence[str]) -> dict[str, float] | None:
+    """Each receiver's position error [m per horizontal axis] in a synchronisation's ``folder`` whose positions were
+    refined (its ``positions.csv``'s ``position_sigma_m``: :func:`position_errors` as the synchronisation made them),
+    by its serial, for each of ``names`` (one the folder does not list: the largest listed, the survey's where any
+    position was left as surveyed); None where they were not refined (no ``positions.csv``, or one written before
+    that column).
+
+    Raises
+    ------
+    ModelError
+        A cell of ``positions.csv`` refused (one line).
+    """
+    sigmas = read_position_sigmas(Path(folder))
+    if sigmas is None:
+        return None
+    return {str(n): sigmas.get(str(n), max(sigmas.values())) for n in names}
+
+
+__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "folder_position_sigmas", "folder_survey",
+           "position_errors"]

@@ -18,7 +18,10 @@ and one between two segments (the stretch around the break) is set aside and cou
 receiver's time went back in the detections file's order, a detection takes a segment of its own clock part.
 
 A synchronisation made with ``--refine-positions`` also wrote ``positions.csv``: its refined horizontal positions
-replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so. One that stated no
+replace the receivers table's ``x``, ``y`` of the receivers it lists, and ``toa.json`` says so; each receiver's
+position error goes with them (its posterior σ in the array's shape where refined, the refinement's prior where it
+kept the table's position: :func:`~.taken_survey.folder_position_sigmas`), as ``receivers.csv``'s ``sigma_m`` and
+``toa.json``'s ``positions.sigma_m``. One made on the table's positions that stated no
 survey error took the one its residuals between receivers saw (``sync.json``'s ``survey_sigma_m``, ``survey_sigma_from``
 ``seen``: :mod:`.taken_survey`): the matrix's ``receivers.csv`` carries it as each receiver's ``sigma_m``, so the
 tracker's σ hold it as a study given that folder does (``toa.json``'s ``survey_sigma_m``).
@@ -53,7 +56,7 @@ from sblsim.orchestrator.store.read import read_any
 from sblsim.orchestrator.sync.clocks import Clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.declared import check_matrix
 from sblsim.orchestrator.sync.study_sync import rounding_warning
-from sblsim.orchestrator.sync.taken_survey import folder_survey
+from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
 
 #: The slowest sound speed the window allows for [m/s] and the synchronisation's tolerance added to it [s].
 SLOWEST_SOUND_SPEED = 1300.0
@@ -76,7 +79,7 @@ class ToaOutcome:
     ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
     noise from the synchronisation (None where it gives none), ``clock_sigma`` (R,) [s] its clock offset's own
     uncertainty (likewise), ``survey_sigma`` [m per horizontal axis] the survey error the synchronisation saw and
-    took, or (R,) each receiver's position's error (a study on refined positions; None where none)."""
+    took, or (R,) each receiver's position's error (on refined positions; None where none)."""
 
     toa: np.ndarray
     names: list[str]
@@ -342,9 +345,11 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     outcome.summary["warnings"] = [w for w in (rounded, outcome.summary["interval_warning"]) if w]
     outcome.summary["set_aside"] = assigned.set_aside
     outcome.summary["receivers_file"] = deployments.summary()
-    if refined is not None:
+    if refined is not None:  # each receiver's position error, as a study given the folder takes it
+        sigmas = folder_position_sigmas(sync, outcome.names)
+        outcome.survey_sigma = None if sigmas is None else np.array([sigmas[n] for n in outcome.names])
         outcome.summary["positions"] = {"source": "the synchronisation's positions.csv (refined)",
-                                        "receivers": moved}
+                                        "receivers": moved, "sigma_m": sigmas}
     else:  # the survey error the synchronisation saw and took, as a study given the folder takes it
         outcome.survey_sigma = folder_survey(sync)
         outcome.summary["survey_sigma_m"] = outcome.survey_sigma

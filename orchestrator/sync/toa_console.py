@@ -30,9 +30,12 @@ def run_lines(outcome, where: str) -> list[str]:
              f"  time base of toa.txt: {s['origin_epoch_s']:.0f} s since 1970-01-01 UTC"
              + (f"; sensor values per ping: {', '.join(s['sensors'])}" if s["sensors"] else "")]
     if "positions" in s:
+        each = s["positions"].get("sigma_m")
         lines.append(f"  receivers' positions: {s['positions']['receivers']} from the synchronisation's "
-                     "positions.csv (refined)")
-    if outcome.survey_sigma is not None:
+                     "positions.csv (refined)" + (
+                         f"; each one's error in the tracker's σ (receivers.csv's sigma_m): {min(each.values()):.3g} "
+                         f"to {max(each.values()):.3g} m per axis" if each else ""))
+    elif outcome.survey_sigma is not None:
         lines.append(f"  survey error the synchronisation saw in its residuals between receivers: "
                      f"{outcome.survey_sigma:.3g} m per axis, taken as the survey's error in the tracker's σ "
                      "(receivers.csv's sigma_m)")

@@ -1,5 +1,5 @@
 """A telemetry study's clocks (:func:`study_clocks`): a synchronisation's folder given (its ``offsets.csv``, its
-refined positions where it has them); else synchronised here from the deployments' sync tags
+refined positions and their errors where it has them); else synchronised here from the deployments' sync tags
 (:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag or the times are too
 coarse, taken as logged (said).
 """
@@ -15,7 +15,7 @@ from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.run import synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
-from sblsim.orchestrator.sync.taken_survey import folder_survey
+from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
@@ -40,12 +40,15 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         refined = read_positions(sync_dir)
         table, _ = with_positions(table, refined)
         missing = sorted(set(table["receiver"]) - set(clocks.receivers))
-        taken = folder_survey(sync_dir)  # the survey error its synchronisation saw and took, as one made here would
+        # the survey error its synchronisation saw and took, as one made here would; on refined positions, each one's
+        each = None if refined is None else folder_position_sigmas(sync_dir, table["receiver"].astype(str).tolist())
+        taken = None if refined is not None else folder_survey(sync_dir)
         return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
                                "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"} | (
-            {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}), None
+            {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}) | (
+            {} if each is None else {"position_sigma_m": each}), None
     rounded = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:
@@ -81,16 +84,19 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
 
 
-def taken_survey(stated: float | None, refine: bool, info: dict) -> float | None:
+def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:
     """The receivers' survey error [m per horizontal axis] a study's σ take: the one ``stated`` (0: none, the
-    positions taken as exact), else, without the refinement (``refine``: its prior is the survey's), the error the
-    synchronisation made here saw in its residuals and took (``info``: :func:`study_clocks`' summary, its
-    ``survey_sigma_from`` ``"seen"``), else None (exact)."""
+    positions taken as exact), else, without the refinement (``refine``: its prior is the survey's), a given folder's
+    refined positions' errors by receiver (``info``: :func:`study_clocks`' summary, its ``position_sigma_m``) or the
+    error the synchronisation saw in its residuals and took (its ``survey_sigma_from`` ``"seen"``), else None
+    (exact)."""
     if stated is not None:
         return None if stated == 0 else stated
-    if refine or info.get("survey_sigma_from") != "seen":
+    if refine:
         return None
-    return float(info["survey_sigma_m"])
+    if info.get("position_sigma_m"):
+        return dict(info["position_sigma_m"])
+    return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
 __all__ = ["TOO_COARSE", "study_clocks", "taken_survey"]

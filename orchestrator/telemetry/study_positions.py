@@ -29,6 +29,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
+from sblsim.orchestrator.sync.taken_survey import position_errors
 
 #: The rounds at most of a refinement (each: the study made again on the positions, its clocks synchronised on
 #: them, and the positions refined again from its tracks), and the largest change of a receiver's refined position
@@ -272,13 +273,11 @@ def _moving(outcome) -> list[str]:
 
 
 def position_sigmas(positions: pd.DataFrame, survey_sigma: float) -> dict[str, float]:
-    """Each receiver's position's error in a study on refined positions [m per axis], by its name: a receiver the
-    pings refined, its posterior σ in the array's shape (``sigma_ratio`` × ``survey_sigma``: the array's translation
-    and rotation, which no time of arrival tells, move a still tag and its receiver together); one they did not, the
-    survey's ``survey_sigma`` (its position the survey's)."""
-    refined = positions["refined"].to_numpy(bool)
-    sigma = np.where(refined, positions["sigma_ratio"].to_numpy(float), 1.0) * float(survey_sigma)
-    return {str(r): float(v) for r, v in zip(positions["receiver"], sigma)}
+    """Each receiver's position's error in a study on refined positions [m per axis], by its name
+    (:func:`~sblsim.orchestrator.sync.taken_survey.position_errors`: ``sigma_ratio`` × ``survey_sigma`` where the
+    pings refined it, ``survey_sigma`` where not)."""
+    return position_errors(positions["receiver"].tolist(), positions["sigma_ratio"], positions["refined"],
+                           survey_sigma)
 
 
 def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,

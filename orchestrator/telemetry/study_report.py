@@ -40,9 +40,12 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                            "refined" if options.get("refine_positions") else c.get("survey_sigma_from"))
         out.extend([f"  {seen}"] if seen else [])
     elif c["source"] == "given":
+        each = c.get("position_sigma_m") if options.get("survey_sigma") is None else None  # (else stated in place)
         out.append(f"  clocks from {c['folder']} ({c['receivers']} receivers, positions {c['positions']})" + (
             f"; the survey error its synchronisation saw taken in every σ: {c['survey_sigma_m']:.3g} m per axis"
-            if c.get("survey_sigma_from") == "seen" else ""))
+            if c.get("survey_sigma_from") == "seen" else "") + (
+            f"; each position's error in every σ: {min(each.values()):.3g} to {max(each.values()):.3g} m per axis"
+            if each else ""))
     elif "one receiver" in c["source"]:
         out.append("  clock taken as logged (one receiver: no other to synchronise it against)")
     elif "too coarse" in c["source"]:

@@ -12,6 +12,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
+import numpy as np
+
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
 from sblsim.orchestrator.sync.matrix_files import sensor_depth, write_matrix
@@ -29,8 +31,9 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     tag's matrix built as ``sblsim toa`` builds it (its lines printed), written with its receivers into a temporary
     folder (named by the tag, so the track's default folder is ``results/track_TAG``), and yielded as the arguments
     of ``replay --format toa`` on them; the folder is removed when the replay ends. The survey error the
-    synchronisation saw and took is each receiver's ``sigma_m`` there (the tracker's σ hold it, as a study given
-    that folder), unless ``--survey-sigma`` states another (0: the positions as exact).
+    synchronisation saw and took, or on its refined positions each one's error, is each receiver's ``sigma_m``
+    there (the tracker's σ hold it, as a study given that folder), unless ``--survey-sigma`` states another (0: the
+    positions as exact).
 
     Raises
     ------
@@ -49,10 +52,16 @@ def replay_matrix(args: argparse.Namespace) -> Iterator[argparse.Namespace]:
     outcome = build(args.log, args.receivers, args.sync, args.tag, REPLAY_FORMATS[args.format], kind, interval,
                     sequence, args.crs, args.frame, args.force_interval)
     seen = outcome.survey_sigma
-    if stated["survey_sigma"] is not None and seen is not None:  # the error stated in place of the one seen
-        outcome.survey_sigma = outcome.summary["survey_sigma_m"] = None
-        print(f"note: --survey-sigma {stated['survey_sigma']:g} m stated in place of the survey error the "
-              f"synchronisation saw ({seen:.3g} m per axis)", file=sys.stderr)
+    if stated["survey_sigma"] is not None and seen is not None:  # the error stated in place of the folder's
+        refined = outcome.summary.get("positions")
+        if refined:
+            refined["sigma_m"] = None
+        else:
+            outcome.summary["survey_sigma_m"] = None
+        outcome.survey_sigma = None
+        print(f"note: --survey-sigma {stated['survey_sigma']:g} m stated in place of " + (
+            f"each refined position's error ({np.min(seen):.3g} to {np.max(seen):.3g} m per axis)" if refined else
+            f"the survey error the synchronisation saw ({seen:.3g} m per axis)"), file=sys.stderr)
     for line in run_lines(outcome, ""):
         print(line, flush=True)
     say_warnings(outcome.summary)

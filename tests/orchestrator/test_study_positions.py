@@ -232,6 +232,30 @@ def test_with_a_measured_sound_speed_the_arrays_scale_is_found_too(simulated, tm
 
 
 @pytest.mark.slow
+def test_a_study_given_a_refined_synchronisation_takes_each_positions_error(simulated, tmp_path):
+    """``sblsim sync --refine-positions`` on the positions 1-5 m off, the sound speed fitted with them, given to the
+    study as ``--sync``: each receiver's ``position_sigma_m`` in the study's clocks and in every tag's
+    ``receivers.csv`` (``sigma_m``), and the tracks' NEES against the truth a consistent one's (the array's scale,
+    which the speed takes up, left out of the σ: with it, 0.08 when written)."""
+    sim, _, _, _, folder = simulated
+    given = folder / "in"
+    sblsim.sync(given / "detections.csv", receivers=folder / "off" / "deployments.csv", refine_positions=True,
+                out=tmp_path / "sync")
+    positions = pd.read_csv(tmp_path / "sync" / "positions.csv", dtype={"serial": str})
+    assert positions["refined"].all() and positions["position_sigma_m"].max() < 0.5, positions
+    study = sblsim.track(given / "detections.csv", receivers=folder / "off" / "deployments.csv",
+                         tags=given / "tags.csv", sync=tmp_path / "sync", workers=2, out=tmp_path / "study")
+    expected = dict(zip(positions["serial"], positions["position_sigma_m"]))
+    assert study.summary["clocks"]["position_sigma_m"] == pytest.approx(expected)
+    matrices = sorted((tmp_path / "study" / "tags").glob("*/receivers.csv"))
+    assert matrices
+    for path in matrices:
+        table = pd.read_csv(path, dtype={"name": str})
+        np.testing.assert_allclose(table["sigma_m"], [expected[n] for n in table["name"]], atol=1e-4)
+    assert 1.0 <= _nees(sim, study) <= 4.5, _nees(sim, study)
+
+
+@pytest.mark.slow
 def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
     """Sixteen receivers, three with a sync tag, 1-5 m off (seed 4): synchronised on the surveyed positions each
     receiver's clock error changes from bin to bin with the sync tags it hears. Refined with the offsets at the bins'
@@ -256,8 +280,8 @@ def test_with_few_sync_tags_the_clocks_offsets_are_fitted_bin_by_bin(tmp_path):
 
 
 def test_the_survey_error_a_study_takes():
-    """The stated error wins (0: none, the positions exact); else, without the refinement, the error the
-    synchronisation saw and took; else none."""
+    """The stated error wins (0: none, the positions exact); else, without the refinement, a given folder's refined
+    positions' errors or the error the synchronisation saw and took; else none."""
     from sblsim.orchestrator.telemetry.study_clocks import taken_survey
 
     seen = {"survey_sigma_m": 2.39, "survey_sigma_from": "seen"}
@@ -266,3 +290,6 @@ def test_the_survey_error_a_study_takes():
     assert taken_survey(None, True, seen) is None  # the refinement's prior is the survey's
     assert taken_survey(None, False, {"survey_sigma_m": 1.0, "survey_sigma_from": "stated"}) is None
     assert taken_survey(None, False, {"source": "given"}) is None  # clocks from a folder: nothing seen here
+    each = {"A": 0.3, "B": 3.0}  # a folder's refined positions: each one's error, unless one is stated
+    assert taken_survey(None, False, {"source": "given", "position_sigma_m": each}) == each
+    assert taken_survey(1.5, False, {"source": "given", "position_sigma_m": each}) == 1.5

@@ -301,6 +301,50 @@ def test_replay_of_raw_detections_takes_the_error_seen_unless_one_is_stated(tmp_
                "(2.2 m per axis)" in err
 
 
+def _refine(sync: Path, positions: np.ndarray, names: list[str], sigmas: dict[str, float]) -> None:
+    """The folder as ``sblsim sync --refine-positions`` leaves it: ``positions.csv`` with the receivers in
+    ``sigmas`` refined (each moved 1 m east, its error its ``position_sigma_m``), the others at the table's (3 m,
+    the prior)."""
+    refined = np.array([n in sigmas for n in names])
+    pd.DataFrame({"serial": names, "x_m": positions[:, 0] + refined, "y_m": positions[:, 1], "refined": refined,
+                  "position_sigma_m": [sigmas.get(n, 3.0) for n in names]}).to_csv(sync / "positions.csv",
+                                                                                   index=False)
+
+
+@pytest.mark.parametrize("stated", [None, "0", "1.5"])
+def test_refined_positions_carry_each_ones_error_to_the_tracker(tmp_path, capsys, array, stated):
+    """A synchronisation's refined positions reach the matrix with each one's error (``sigma_m``: its
+    ``position_sigma_m``), as a study given that folder takes them;
+    said on the console and in ``toa.json``. The replay from raw detections carries the same unless
+    ``--survey-sigma`` states another in its place (a note)."""
+    from sblsim.orchestrator.cli import _parser
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.tracks.replay_detections import replay_matrix
+
+    positions, _, _, names = array
+    detections, hydrophones, sync = _case(tmp_path, array)
+    sigmas = {"R0": 0.3, "R3": 0.6, "R5": 0.15}
+    _refine(sync, positions, names, sigmas)
+    expected = np.array([sigmas.get(n, 3.0) for n in names])
+    argv = ["replay", str(detections), "--format", "detections", "--receivers", str(hydrophones), "--sync",
+            str(sync), "--tag", "T1"] + ([] if stated is None else ["--survey-sigma", stated])
+    with replay_matrix(_parser().parse_args(argv)) as toa_args:
+        table = read_receivers(toa_args.receivers)
+    said = capsys.readouterr()
+    np.testing.assert_allclose(table.positions[:, 0], positions[:, 0] + np.isin(names, list(sigmas)), atol=1e-4)
+    if stated is None:
+        np.testing.assert_allclose(table.sigma, expected)
+        assert "each one's error in the tracker's σ (receivers.csv's sigma_m): 0.15 to 3 m per axis" in said.out
+        assert main(["toa", str(detections), "--receivers", str(hydrophones), "--sync", str(sync), "--tag", "T1",
+                     "--out", str(tmp_path / "toa")]) == 0
+        written = json.loads((tmp_path / "toa" / "toa.json").read_text())["positions"]["sigma_m"]
+        assert written == pytest.approx(dict(zip(names, expected)))
+    else:
+        assert table.sigma is None and toa_args.survey_sigma == float(stated)
+        assert f"--survey-sigma {float(stated):g} m stated in place of each refined position's error (0.15 to 3 m " \
+               "per axis)" in said.err
+
+
 @pytest.mark.parametrize("survey", [None, 1.5, np.array([0.4, 3.0])])
 def test_receivers_csv_carries_each_receivers_survey_error(tmp_path, survey):
     """``sigma_m``: one error for every receiver (the synchronisation's seen), each receiver's own (a study's refined
