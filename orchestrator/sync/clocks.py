@@ -379,6 +379,7 @@ def read_position_sigmas(folder: Path | str) -> dict[str, float] | None:
         raise ModelError(f"{what}: {name!r}: a receiver is listed twice; allowed: one row per receiver")
     return {n: float(v) for n, v in zip(serial, sigma)}
 
+
 def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] | None) -> tuple[pd.DataFrame, int]:
     """The receivers table (``receiver``, ``x``, ``y``, ...) with a synchronisation's refined horizontal positions
     (:func:`read_positions`; None: none) in place of the table's for the receivers it lists; and how many it moved."""

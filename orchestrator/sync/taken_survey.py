@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -34,28 +34,6 @@ MAX_SYNC_JSON_BYTES = 64 * 2**20
 MAX_SYNC_JSON_LINES = 5_000_000
 
 
-def _sync_json(folder: Path) -> tuple[dict[str, Any], str] | None:
-    """A synchronisation's ``sync.json`` parsed, and how a message names it; None where the folder has none.
-
-    Raises
-    ------
-    ModelError
-        Larger than :data:`MAX_SYNC_JSON_BYTES`, not JSON, not an object (one line).
-    """
-    path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
-    if not path.is_file():
-        return None
-    shown = f"sync: {str(path)[:120]!r}"
-    text = read_text(path, "sync", MAX_SYNC_JSON_BYTES, MAX_SYNC_JSON_LINES)
-    try:
-        data = json.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise ModelError(f"{shown} is not JSON ({str(exc)[:80]}); allowed: the sync.json sblsim sync writes") from None
-    if not isinstance(data, dict):
-        raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
-    return data, shown
-
-
 def folder_survey(folder: Path | str) -> float | None:
     """The survey error [m per horizontal axis] a synchronisation's ``folder`` took as seen (module docstring);
     None where it took none (stated, not seen, or no ``sync.json``).
@@ -67,10 +45,20 @@ def folder_survey(folder: Path | str) -> float | None:
         not a number in a stated survey error's range
         (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took one (one line).
     """
-    read = _sync_json(Path(folder))
-    if read is None or read[0].get("survey_sigma_from") != "seen":
+    folder = Path(folder)
+    path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
+    if not path.is_file():
         return None
-    data, shown = read
+    shown = f"sync: {str(path)[:120]!r}"
+    text = read_text(path, "sync", MAX_SYNC_JSON_BYTES, MAX_SYNC_JSON_LINES)
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise ModelError(f"{shown} is not JSON ({str(exc)[:80]}); allowed: the sync.json sblsim sync writes") from None
+    if not isinstance(data, dict):
+        raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
+    if data.get("survey_sigma_from") != "seen":
+        return None
     return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_SIGMA_RANGE, "m")
 
 
