@@ -10,6 +10,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import ProgressSpec, progress_of
 from sblsim.orchestrator.telemetry.study_report import opening_lines
@@ -18,7 +19,20 @@ from sblsim.orchestrator.tracks.resume import Resume
 
 def _run(detections: Path, receivers: Path, tags: Path | None, sync: Path | None, options: dict[str, Any],
          target: Path | None, progress: ProgressSpec, lines: bool = False):
-    """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported."""
+    """The study run into ``target`` (all or nothing; a temporary folder where None), its progress reported.
+
+    Raises
+    ------
+    ConfigError
+        ``refine_positions`` with a synchronisation's folder given (``sync``), before any work: the refinement
+        synchronises the clocks again on the positions it refines, round by round, and a folder's clocks are fixed
+        (its refined positions would also stand in place of the study's).
+    """
+    if sync is not None and options.get("refine_positions"):
+        raise ConfigError("--refine-positions: not with --sync (a synchronisation's folder given): the refinement "
+                          "synchronises the clocks again on the positions it refines, and a folder's clocks are "
+                          "fixed; allowed: one or the other (sblsim sync --refine-positions refines the positions "
+                          "with the clocks, and its folder given as --sync carries them and their errors)")
     from sblsim.orchestrator.telemetry.outputs import write_study
     from sblsim.orchestrator.telemetry.study import run_study
 
