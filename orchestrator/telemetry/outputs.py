@@ -7,7 +7,8 @@ tags), ``tracks.geojson`` (RFC 7946: the receivers used as points, each tag's ro
 longitude and latitude; where the frame is known), ``reference_tags.csv`` (the reference tags and the sync tags
 left out in turn, scored against their known positions: :mod:`.reference_tags`), ``positions.csv`` (with
 ``--refine-positions``: the receivers' positions refined from the moving tags, :mod:`.study_positions`), ``map.png``
-(:func:`study_map`), the synchronisation made (``sync/``, as ``sblsim sync`` writes it) and one folder per tag
+(:func:`study_map`), the synchronisation made (``sync/``, as ``sblsim sync`` writes it; with the refined positions
+its clocks were made on, and their errors, where a refinement was kept) and one folder per tag
 (its ``toa.txt``, ``receivers.csv``, ``pings.csv``, ``toa.json`` and its track's files as ``sblsim replay`` writes
 them).
 """
@@ -29,6 +30,7 @@ from sblsim.orchestrator.sync.outputs import write as write_sync
 from sblsim.orchestrator.telemetry import reference_tags as references
 from sblsim.orchestrator.telemetry.report.page import study_report
 from sblsim.orchestrator.telemetry.study import StudyOutcome
+from sblsim.orchestrator.telemetry.study_positions import sync_positions
 from sblsim.orchestrator.telemetry.study_tracks import tag_tracks
 from sblsim.orchestrator.tracks.outputs import scale_bar, write
 
@@ -317,6 +319,10 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
             write(tag, folder / name)
     if outcome.sync is not None:
         write_sync(outcome.sync, folder / "sync")
+        refined = outcome.summary.get("positions") or {}
+        if outcome.positions is not None and refined.get("kept"):  # its clocks made on them: the folder's positions
+            sync_positions(outcome.positions, refined["survey_sigma_m"]).to_csv(folder / "sync" / "positions.csv",
+                                                                               index=False)
     # the synchronisation's row per sync-tag arrival, written, kept on disk while the tracks and the report are
     # made (read back at the end: the outcome the study returns keeps it)
     with spilled(outcome.sync, "residuals", folder) if outcome.sync is not None else nullcontext():

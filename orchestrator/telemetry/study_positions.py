@@ -280,6 +280,18 @@ def position_sigmas(positions: pd.DataFrame, survey_sigma: float) -> dict[str, f
                            survey_sigma)
 
 
+
+def sync_positions(positions: pd.DataFrame, survey_sigma: float) -> pd.DataFrame:
+    """A kept refinement's ``positions.csv`` (:class:`StudyRefinement`) as ``sblsim sync --refine-positions``
+    writes its own (``serial``, ``x_m``, ``y_m``, ``table_x_m``, ``table_y_m``, ``refined``, ``position_sigma_m``:
+    :func:`position_sigmas`), for the study's ``sync/`` folder, whose clocks were synchronised on these positions:
+    ``sblsim toa`` and a study given that folder (``--sync``) take them and their errors."""
+    return pd.DataFrame({"serial": positions["receiver"].astype(str).to_numpy(), "x_m": positions["x"].to_numpy(),
+                         "y_m": positions["y"].to_numpy(), "table_x_m": positions["survey_x"].to_numpy(),
+                         "table_y_m": positions["survey_y"].to_numpy(),
+                         "refined": positions["refined"].to_numpy(bool),
+                         "position_sigma_m": list(position_sigmas(positions, survey_sigma).values())})
+
 def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,
                   tags_folder: str):
     """A study (:class:`~sblsim.orchestrator.telemetry.study.StudyOutcome`) made again by ``again(deployments,

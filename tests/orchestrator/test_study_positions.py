@@ -88,6 +88,20 @@ def test_each_positions_error_is_its_shape_sigma_or_the_surveys():
     assert position_sigmas(positions, 3.0) == pytest.approx({"A": 0.3, "B": 3.0, "C": 0.75})
 
 
+def test_a_kept_refinement_is_its_synchronisations_positions_as_sblsim_sync_writes_them(tmp_path):
+    """The study's ``sync/positions.csv``: the refined positions and each one's error, read back by the readers
+    ``sblsim toa`` and a study given the folder use (a receiver held at the survey: its position and the survey σ)."""
+    from sblsim.orchestrator.sync.clocks import read_positions
+    from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas
+    from sblsim.orchestrator.telemetry.study_positions import sync_positions
+
+    positions = pd.DataFrame({"receiver": ["A", "B"], "x": [10.5, 20.0], "y": [1.25, 2.0], "survey_x": [10.0, 20.0],
+                              "survey_y": [1.0, 2.0], "refined": [True, False], "sigma_ratio": [0.1, 0.7]})
+    sync_positions(positions, 3.0).to_csv(tmp_path / "positions.csv", index=False)
+    assert read_positions(tmp_path) == {"A": (10.5, 1.25), "B": (20.0, 2.0)}
+    assert folder_position_sigmas(tmp_path, ["A", "B"]) == pytest.approx({"A": 0.3, "B": 3.0})
+
+
 def test_the_survey_sigma_is_the_prior_or_the_stated_error():
     """With the refinement the survey σ is its prior (3 m unless given, above 0); without, the survey's stated error
     (None unless given: the error the synchronisation sees, else exact; 0: exact), in range or refused."""
@@ -216,6 +230,11 @@ def test_the_tracks_come_back_to_the_true_positions_accuracy(simulated):
     at = positions.set_index("receiver").loc[order, ["x", "y"]].to_numpy()
     shape = shape_rms(at - true, true, scale=True)
     assert shape < 0.2 and positions["refined"].all(), (shape, positions)
+    # the study's sync/ folder, its clocks made on the refined positions, has them and their errors too
+    given = pd.read_csv(folder / "off_refined" / "sync" / "positions.csv", dtype={"serial": str}).set_index("serial")
+    np.testing.assert_allclose(given.loc[order, ["x_m", "y_m"]].to_numpy(), at)
+    np.testing.assert_allclose(given.loc[order, "position_sigma_m"],
+                               positions.set_index("receiver").loc[order, "sigma_ratio"] * summary["survey_sigma_m"])
     checks = summary["checks"]["sync_left_out"]
     assert checks["refined_m"] <= 1.05 * checks["survey_m"], checks
 
@@ -228,6 +247,7 @@ def test_an_array_surveyed_right_is_left_as_it_is(simulated):
     assert not summary["kept"] and summary["refined"] == 0, summary
     assert _rms(sim, runs["right refined"]) <= 1.02 * _rms(sim, runs["right"])
     assert not pd.read_csv(folder / "right_refined" / "positions.csv")["refined"].any()
+    assert not (folder / "right_refined" / "sync" / "positions.csv").exists()  # its clocks made on the survey's
 
 
 @pytest.mark.slow
