@@ -313,7 +313,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored, not refine_positions)
         taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
-        survey, taken = (taken, None) if survey is None and isinstance(taken, dict) else (survey, taken)  # each's
+        survey, taken = (taken, None) if survey is None and isinstance(taken, dict) else (survey, taken)  # by receiver
         scored = taken if survey is None else survey
         _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
         frame_crs = None if deployments.frame is None else deployments.frame.crs

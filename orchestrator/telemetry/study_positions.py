@@ -280,7 +280,6 @@ def position_sigmas(positions: pd.DataFrame, survey_sigma: float) -> dict[str, f
                            survey_sigma)
 
 
-
 def sync_positions(positions: pd.DataFrame, survey_sigma: float) -> pd.DataFrame:
     """A kept refinement's ``positions.csv`` (:class:`StudyRefinement`) as ``sblsim sync --refine-positions``
     writes its own (``serial``, ``x_m``, ``y_m``, ``table_x_m``, ``table_y_m``, ``refined``, ``position_sigma_m``:
@@ -291,6 +290,7 @@ def sync_positions(positions: pd.DataFrame, survey_sigma: float) -> pd.DataFrame
                          "table_y_m": positions["survey_y"].to_numpy(),
                          "refined": positions["refined"].to_numpy(bool),
                          "position_sigma_m": list(position_sigmas(positions, survey_sigma).values())})
+
 
 def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,
                   tags_folder: str):
