@@ -228,8 +228,7 @@ def main(args: argparse.Namespace) -> int:
                         "sync.json", "synchronisation")
     write(outcome, out)
     s = outcome.summary
-    d = s["detections"]
-    c = s["sound_speed"]
+    d, c = s["detections"], s["sound_speed"]
     speed_text = (f"{c['sound_speed_m_s']:.1f} m/s ({c['source']})" if "sound_speed_m_s" in c
                   else "from the series")
     print(f"sync of {args.detections}: {d['sync_arrivals']} sync-tag arrivals of {d['rows']} detections, "
@@ -257,7 +256,8 @@ def main(args: argparse.Namespace) -> int:
             print(f"  positions refined (prior {q['survey_sigma_m']:g} m per axis): median shift "
                   f"{q['median_shift_m']:.3g} m, the largest {q['largest_shift_m']:.3g} m "
                   f"({q['largest_shift_receiver']}); {q['determined']} of {q['receivers']} receivers determined by "
-                  "the sync tags, the others keep the table's (positions.csv's reason)")
+                  "the sync tags, the others keep the table's (positions.csv's reason); each one's error for a "
+                  f"tracker {min(q['position_sigma_m']):.3g} to {max(q['position_sigma_m']):.3g} m per axis")
         loo = q.get("leave_one_out")
         if loo:
             print(f"  sync tags' leave-one-out median error: {_loo_text(loo['table'])} with the table's positions "

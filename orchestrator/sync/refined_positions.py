@@ -124,6 +124,7 @@ def _kept(refined, table, survey_sigma: float):
     positions[["sigma_x_m", "sigma_y_m", "correlation_xy"]] = np.nan
     positions["position_sigma_m"] = float(survey_sigma)
     table.positions = positions
-    table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record}
+    table.summary["positions"] = {**refined.summary["positions"], "refined": False, "leave_one_out": record,
+                                  "position_sigma_m": [float(survey_sigma)] * 2}
     table.summary.setdefault("warnings", []).append(f"refine positions: {why}: the table's positions kept")
     return table

@@ -446,6 +446,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
             "median_shift_m": float(shift.median()) if len(shift) else None,
             "largest_shift_m": float(shift.max()) if len(shift) else None,
             "largest_shift_receiver": str(refined.loc[shift.idxmax(), "serial"]) if len(shift) else None,
+            "position_sigma_m": [float(refined["position_sigma_m"].min()), float(refined["position_sigma_m"].max())],
             "gauge": "the arrivals fix the array's shape only; its translation and rotation come from the prior",
             "determined": int(identified.determined.sum()), "receivers": len(names),
             "held": [names[j] for j in np.flatnonzero(~identified.determined)],

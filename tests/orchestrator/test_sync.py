@@ -229,10 +229,16 @@ def test_the_positions_refined_on_a_small_array(tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["sync", str(detections), "--receivers", str(hydrophones), "--sound-speed", str(sim.sound_speed),
                  "--reference", "R0", "--refine-positions", "--survey-sigma", "2", "--out", str(out)])
-    assert code == 0 and "positions refined (prior 2 m per axis)" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert code == 0 and "positions refined (prior 2 m per axis)" in printed
     q = pd.read_csv(out / "positions.csv")
     assert list(q["serial"]) == [f"R{j}" for j in range(8)] and q["refined"].sum() >= 6
     held = ~q["refined"].to_numpy()
+    # each one's error for a tracker: the shape's posterior σ where refined (the speed given: its scale the arrivals'),
+    # the prior where held; its range on the console
+    expected = np.where(held, 2.0, 2.0 * q["sigma_ratio"].to_numpy())
+    np.testing.assert_allclose(q["position_sigma_m"], expected, rtol=1e-12)
+    assert f"each one's error for a tracker {expected.min():.3g} to {expected.max():.3g} m per axis" in printed
     assert q["reason"].fillna("").str.startswith("determined only with sync tag").to_numpy()[held].all()
     np.testing.assert_allclose(q[["table_x_m", "table_y_m"]], table, atol=1e-9)
     np.testing.assert_allclose(q.loc[held, ["x_m", "y_m"]], table[held], atol=1e-9)
