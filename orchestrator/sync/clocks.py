@@ -327,6 +327,32 @@ def _columns(path: Path, what: str, needed: tuple[str, ...], source: str, option
     return body, lines, name, {c: lower.index(c) for c in (*needed, *(o for o in optional if o in lower))}
 
 
+def _positions_rows(folder: Path | str, needed: tuple[str, ...], optional: tuple[str, ...] = ()) -> tuple | None:
+    """A synchronisation's ``positions.csv`` read back (:func:`_columns`): its body, line numbers, name, columns and
+    each row's receiver serial (checked); None where the folder has none."""
+    path = _in_folder(Path(folder), "positions.csv")
+    if not path.exists():
+        return None
+    body, lines, name, col = _columns(path, "sync", ("serial", *needed),
+                                      "sblsim sync --refine-positions' positions.csv", optional)
+    serial = _pattern(body[col["serial"]], IDENTIFIER, "sync", name, lines, "serial",
+                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
+    return body, lines, name, col, serial
+
+
+def _by_serial(serial: list[str], values, name: str) -> dict:
+    """Each receiver's value by its serial.
+
+    Raises
+    ------
+    ModelError
+        A receiver listed twice (one line).
+    """
+    if len(set(serial)) != len(serial):
+        raise ModelError(f"sync: {name!r}: a receiver is listed twice; allowed: one row per receiver")
+    return dict(zip(serial, values))
+
+
 def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     """The refined positions of a synchronisation's folder (``positions.csv``: ``serial``, ``x_m``, ``y_m``; other
     columns ignored), None where it has none (the positions were not refined).
@@ -336,19 +362,13 @@ def read_positions(folder: Path | str) -> dict[str, tuple[float, float]] | None:
     ModelError
         One line: a cell outside its pattern or range, a receiver twice.
     """
-    path = _in_folder(Path(folder), "positions.csv")
-    if not path.exists():
+    read = _positions_rows(folder, ("x_m", "y_m"))
+    if read is None:
         return None
-    what = "sync"
-    body, lines, name, col = _columns(path, what, ("serial", "x_m", "y_m"),
-                                      "sblsim sync --refine-positions' positions.csv")
-    serial = _pattern(body[col["serial"]], IDENTIFIER, what, name, lines, "serial",
-                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
-    x = _numbers(body[col["x_m"]], what, name, lines, "x_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
-    y = _numbers(body[col["y_m"]], what, name, lines, "y_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
-    if len(set(serial)) != len(serial):
-        raise ModelError(f"{what}: {name!r}: a receiver is listed twice; allowed: one row per receiver")
-    return {n: (float(a), float(b)) for n, a, b in zip(serial, x, y)}
+    body, lines, name, col, serial = read
+    x = _numbers(body[col["x_m"]], "sync", name, lines, "x_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
+    y = _numbers(body[col["y_m"]], "sync", name, lines, "y_m", -MAX_COORDINATE, MAX_COORDINATE, unit="m")
+    return _by_serial(serial, [(float(a), float(b)) for a, b in zip(x, y)], name)
 
 
 def read_position_sigmas(folder: Path | str) -> dict[str, float] | None:
@@ -363,21 +383,13 @@ def read_position_sigmas(folder: Path | str) -> dict[str, float] | None:
         One line: a cell outside its pattern or range
         (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`), a receiver twice.
     """
-    path = _in_folder(Path(folder), "positions.csv")
-    if not path.exists():
+    read = _positions_rows(folder, (), ("position_sigma_m",))
+    if read is None or "position_sigma_m" not in read[3]:
         return None
-    what = "sync"
-    body, lines, name, col = _columns(path, what, ("serial",), "sblsim sync --refine-positions' positions.csv",
-                                      ("position_sigma_m",))
-    if "position_sigma_m" not in col:
-        return None
-    serial = _pattern(body[col["serial"]], IDENTIFIER, what, name, lines, "serial",
-                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").tolist()
-    sigma = _numbers(body[col["position_sigma_m"]], what, name, lines, "position_sigma_m", *SURVEY_SIGMA_RANGE,
+    body, lines, name, col, serial = read
+    sigma = _numbers(body[col["position_sigma_m"]], "sync", name, lines, "position_sigma_m", *SURVEY_SIGMA_RANGE,
                      unit="m")
-    if len(set(serial)) != len(serial):
-        raise ModelError(f"{what}: {name!r}: a receiver is listed twice; allowed: one row per receiver")
-    return {n: float(v) for n, v in zip(serial, sigma)}
+    return _by_serial(serial, [float(v) for v in sigma], name)
 
 
 def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] | None) -> tuple[pd.DataFrame, int]:
