@@ -90,7 +90,8 @@ class StillVerdict:
     :data:`MIN_STILL` fixes before the change, or those in an order in time its error terms do not make:
     :func:`wanders`). ``detectable`` (2,) [m]: the smallest step a single fix could see, in the best and the worst
     direction (the square roots of χ²(2) at :data:`STEP_LEVEL` times the eigenvalues of a fix's own and slow
-    covariance; NaN where undecided): a smaller move is not told from the fixes' scatter."""
+    covariance; NaN where undecided): a smaller move is not told from the fixes' scatter. With no ``change``,
+    ``throughout`` is the order test asked for (``order_test``)."""
 
     fixes: int
     white_scale: float
@@ -224,7 +225,7 @@ def threshold(candidates: int, level: float = LEVEL) -> float:
 
 def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray, trusted: np.ndarray,
                   slow: np.ndarray, multipath: np.ndarray | None = None, time_scale: float = SLOW_TIME_S,
-                  level: float = LEVEL) -> StillVerdict:
+                  level: float = LEVEL, order_test: bool = False) -> StillVerdict:
     """Whether, and from which fix on, a still tag moved beyond what its error terms let its fixes wander (module
     docstring).
 
@@ -247,6 +248,10 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
         Their correlation time [s].
     level : float
         α.
+    order_test : bool
+        Where no change is found, whether the fixes lie in an order in time their error terms do not make
+        (:func:`wanders`: ``throughout`` with no ``change``; a caller's second input, such as arrivals that fit no
+        one place, says when to ask).
 
     Returns
     -------
@@ -284,7 +289,10 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
         if not np.isfinite(candidates).any():
             break
         change = end = MIN_SEGMENT + int(np.argmax(candidates))
-    throughout = change is not None and (change < MIN_STILL or wanders(x[:change], Rw[:change], G[..., :change]))
+    if change is None:
+        throughout = order_test and wanders(x, Rw, G)
+    else:
+        throughout = change < MIN_STILL or wanders(x[:change], Rw[:change], G[..., :change])
     return StillVerdict(len(k), s2, first, bound, k, change, throughout, detectable)
 
 

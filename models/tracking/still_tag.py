@@ -23,6 +23,16 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 #: :data:`~sblsim.models.tracking.still.MIN_SEGMENT`): with fewer, whether the tag moved is unchecked, and said so
 #: (the verdict ``unchecked``), not called still.
 UNCHECKED_BELOW = 2 * sv.MIN_SEGMENT
+#: The least share of its arrivals a still tag's one place explains (each within the robust fit's kept residual at the
+#: stated timing noise: :func:`explained_share`; its still part's, where its fixes say it moved). Where fewer, the tag
+#: is neither still nor moved once: ``moving`` where its fixes say it moved or lie in an order in time its error terms
+#: do not make (:func:`~sblsim.models.tracking.still.wanders`), else ``unchecked`` (it moved where its few trusted fixes
+#: cannot tell it from their errors, or its timing noise is several times the stated). A still tag's place explains all
+#: its arrivals but its reflections (0.84 to 1.0 on the boats' reference and sync tags, 0.92 on a canal whose receiver
+#: hears a reflection 30 % of the time), a tag moved once half way 0.79 over its record and all before its move, a
+#: random walk of 2 m a ping on a bent canal's four receivers 0.36 to 0.49 (0.41 to 0.51 before a change its fixes
+#: found); a still tag whose timing noise is 7 times the stated 0.65, 10 times 0.53 to 0.55, 15 times 0.42 to 0.44.
+MIN_EXPLAINED = 0.5
 
 
 def stationary_track(toa: np.ndarray, positions: np.ndarray, c: float, fixes: np.ndarray,
@@ -174,12 +184,31 @@ class StillTag:
     summary: dict[str, Any]
 
 
+def explained_share(y: np.ndarray, positions: np.ndarray, c: float, pooled, sigma: np.ndarray) -> float:
+    """The share of a still tag's arrivals ``y`` (m, n) [s] (NaN where not heard) its one place ``pooled`` explains:
+    each ping's residuals at the place (its emission time their robust weighted mean, as the fit takes it) within
+    the robust fit's kept residual, ``(ν + 1) / w − ν`` in σ² at ν = :data:`~sblsim.models.tracking.smoother_cost.
+    ROBUST_DOF` and ``w`` = :data:`~sblsim.models.tracking.smoother.ROBUST_KEPT_WEIGHT` (6.1 σ) of the timing noise
+    ``sigma`` (n,) [s]; NaN where none was heard."""
+    from sblsim.models.tracking.smoother import ROBUST_KEPT_WEIGHT
+    from sblsim.models.tracking.smoother_cost import ROBUST_DOF
+    from sblsim.models.tracking.stationary import _centred, _geometry, _per_ping
+
+    heard = np.isfinite(y)
+    if not heard.any():
+        return float("nan")
+    emitted = _geometry(np.where(heard, y, 0.0), positions, c, pooled.position)[1]
+    z = _centred(emitted, _per_ping(np.where(heard, pooled.weights, 0.0), sigma)) / sigma
+    return float(np.mean(z[heard] ** 2 <= (ROBUST_DOF + 1.0) / ROBUST_KEPT_WEIGHT - ROBUST_DOF))
+
+
 def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
     """One place of a still tag from the pings ``rows``: its pooled fit (the sound speed's change fitted beside it:
     :func:`changing_track`), the consider terms and the receivers' term summed (dim, dim) [m²], the receivers'
-    term's DRMS [m], the survey's gains (:func:`survey_gains`) and the speed's change fitted [m/s] (its least and
-    largest; None where the record is too short to fit it); the consider terms and the gains from one bias
-    sensitivity, all on the times of arrival less the speed's change."""
+    term's DRMS [m], the survey's gains (:func:`survey_gains`), the speed's change fitted [m/s] (its least and
+    largest; None where the record is too short to fit it) and the share of the arrivals the place explains
+    (:func:`explained_share`); the consider terms and the gains from one bias sensitivity, all on the times of
+    arrival less the speed's change."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     fitted = changing_track(toa[rows], positions, c, fixes[rows], sigma_toa)
@@ -191,8 +220,9 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     spread = receivers_term(y, positions, c, pooled, sigma_toa)
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
     beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
+    sigma = np.broadcast_to(np.asarray(sigma_toa, float), (len(positions),))
     return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
-            fitted.speed_range(c) if fitted.knots else None)
+            fitted.speed_range(c) if fitted.knots else None, explained_share(y, positions, c, pooled, sigma))
 
 
 def _beyond(spread: np.ndarray, own: np.ndarray) -> np.ndarray:
@@ -226,8 +256,11 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     keeps its first place on the rows before the change and its second place (where it went) on the rows from the
     split (the pings between its last still trusted fix and its first moved one given to the place their arrivals
     fit: :func:`split_ping`), those flagged; one that moved the whole time keeps one place, every row flagged (an
-    animal). With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved: ``unchecked`` (its
-    rows are flagged by the caller), not still.
+    animal). One whose place explains fewer than :data:`MIN_EXPLAINED` of its arrivals (:func:`explained_share`; its
+    still part's place, where it moved) is not called still: it moved the whole time where its fixes say it moved or lie
+    in an order its error terms do not make (an animal whose few trusted fixes scatter far beyond their covariance),
+    else ``unchecked``. With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved:
+    ``unchecked`` (its rows are flagged by the caller), not still.
 
     Parameters
     ----------
@@ -264,24 +297,33 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
     rows = np.arange(m)
-    pooled, extra, spread, gains, changed = _place(toa, positions, c, fx, rows, sigma_toa, survey, speed_sigma,
-                                                   clock_sigma)
+    pooled, extra, spread, gains, changed, explained = _place(toa, positions, c, fx, rows, sigma_toa, survey,
+                                                              speed_sigma, clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
     slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
                               np.diag(clock**2) + wander**2 * np.outer(rho, rho) / c**4)
     multipath = sv.slow_covariance(positions, pooled.position, c, used, sigma, np.diag(sigma**2))
-    verdict = sv.still_verdict(fx, fc, fe, trusted, slow, multipath)
+    # a place that explains too few of its arrivals: whether its fixes lie in an order their errors do not make
+    verdict = sv.still_verdict(fx, fc, fe, trusted, slow, multipath, order_test=explained < MIN_EXPLAINED)
     count, ratio, ordered = moved(fx, fe, trusted)
-    went = verdict.change is not None and ordered
+    went, throughout = verdict.change is not None and ordered, verdict.throughout
+    if went and not throughout:  # its still part: the rows to its last still trusted fix
+        last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
+        before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
+        explained = before[5]
+    # no one place (the still part's where it moved): it moved the whole time where its fixes say it moved or
+    # wander, else unchecked
+    scattered = verdict.fixes >= UNCHECKED_BELOW and (not went or not throughout) and explained < MIN_EXPLAINED
+    throughout = throughout or (scattered and went)
+    went = went or (scattered and throughout)
+    unchecked = verdict.fixes < UNCHECKED_BELOW or (scattered and not throughout)
     emissions, kept = _rows(pooled, rows, m)
     places = np.repeat(pooled.position[None], m, axis=0)
     own, held = np.repeat(pooled.covariance[None], m, axis=0), np.repeat(extra[None], m, axis=0)
-    after, change = np.zeros(m, bool) | (went and verdict.throughout), None
-    if went and not verdict.throughout:  # the rows from the split moved
-        last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
+    after, change = np.zeros(m, bool) | (went and throughout), None
+    if went and not throughout:  # the rows from the split moved
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
-        before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
         split = last + 1
         if first > last + 1:  # the rows between the two trusted fixes: each side's place from its own side's rows
             try:
@@ -291,7 +333,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
             if gone is not None:
                 split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone)
         after[split:] = True
-        pooled, extra, spread, gains, changed = before if split == last + 1 else _place(
+        pooled, extra, spread, gains, changed, explained = before if split == last + 1 else _place(
             toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)
         places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
@@ -312,10 +354,10 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if change is not None:
         change["rows_moved"] = int(after[kp].sum())
     scale = verdict.white_scale if np.isfinite(verdict.white_scale) else 1.0
-    unchecked = verdict.fixes < UNCHECKED_BELOW
-    said = "unchecked" if unchecked else "moving" if went and verdict.throughout else "moved" if went else "still"
+    said = "unchecked" if unchecked else "moving" if went and throughout else "moved" if went else "still"
     summary = {"verdict": said,
                "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
+               "explained_share": _number(explained), "scattered": bool(scattered),
                "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
                "detectable_step_m": [_number(x) for x in verdict.detectable],
@@ -360,5 +402,6 @@ def survey_cross(still: dict[str, Any], k: int, survey: np.ndarray) -> np.ndarra
     return np.asarray(gains, float)[k, :2] @ np.asarray(survey, float)
 
 
-__all__ = ["UNCHECKED_BELOW", "StillTag", "changing_track", "place_score", "receivers_term", "stationary_consider",
+__all__ = ["MIN_EXPLAINED", "UNCHECKED_BELOW", "StillTag", "changing_track", "explained_share", "place_score",
+           "receivers_term", "stationary_consider",
            "stationary_track", "split_ping", "still_tag", "survey_cross", "survey_gains"]

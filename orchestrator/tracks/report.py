@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from sblsim.models.tracking.schedule import PING_TYPES
+from sblsim.models.tracking.still_tag import MIN_EXPLAINED
 from sblsim.orchestrator.tracks.depth import prior_line
 from sblsim.orchestrator.tracks.outcome import ESTIMATOR_NAMES, TrackOutcome
 from sblsim.orchestrator.tracks.speed import replaced_line
@@ -92,8 +93,16 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             f"series' times [{c['series_time_s'][0]:.10g}, {c['series_time_s'][1]:.10g}] s: their arrivals take "
             "the speed at its nearer end", True)
     m = s["motion"]
-    if (m.get("still") or {}).get("verdict") == "unchecked":
-        say(f"sblsim: warning: whether the tag moved is unchecked: {m['still']['trusted_fixes']} trusted single-ping "
+    still = m.get("still") or {}
+    explains = (f"one place explains {100 * (still.get('explained_share') or 0):.0f} % of its arrivals at the timing "
+                f"noise stated, fewer than {100 * MIN_EXPLAINED:.0f} %")
+    if still.get("verdict") == "unchecked" and still.get("scattered"):
+        say(f"sblsim: warning: whether the tag moved is unchecked: {explains}, and its {still['trusted_fixes']} "
+            "trusted single-ping fixes do not tell motion from their errors (it moved, or its timing noise is several "
+            "times the stated: give --toa-sigma); its place takes it as still, every row flagged motion_unchecked",
+            True)
+    elif still.get("verdict") == "unchecked":
+        say(f"sblsim: warning: whether the tag moved is unchecked: {still['trusted_fixes']} trusted single-ping "
             "fixes, too few to test their wander; its place takes it as still, every row flagged motion_unchecked",
             True)
     if m.get("moved"):
@@ -101,7 +110,11 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
         beyond = (f"beyond what its error terms let its fixes wander (step statistic {v['step_statistic']:.3g} over "
                   f"{v['threshold']:.3g}; successive fixes {m['moved_test']['successive_ratio']:.2f} of their spread "
                   "apart)")
-        if change is None:
+        if change is None and v.get("scattered"):
+            say(f"sblsim: warning: the tag moved the whole time: {explains}, and its {v['trusted_fixes']} trusted "
+                "single-ping fixes wander beyond what its error terms allow; every row flagged (track it with "
+                "--motion moving)", True)
+        elif change is None:
             say(f"sblsim: warning: the tag moved the whole time: its {v['trusted_fixes']} trusted single-ping fixes "
                 f"wander {beyond}; every row flagged (track it with --motion moving)", True)
         else:

@@ -237,3 +237,19 @@ def test_the_order_test_takes_a_fix_covariance_singular_to_rounding():
     w, V = np.linalg.eigh(R[5])
     root = V * np.sqrt(np.maximum(w, 0.0))
     np.testing.assert_allclose(root @ root.T, 0.02 * np.outer(u, u), atol=1e-15)
+
+
+def test_the_order_test_asked_for_finds_a_slow_wander_no_step_shows():
+    """A walk of 0.1 m a fix among fixes of 1 m noise (200, ten minutes apart): no step a single fix could see, so no
+    change; asked for (``order_test``), the fixes' order says it moved the whole time (seeds 0 and 1), and never on
+    fixes of white noise alone (10 seeds); not asked, ``throughout`` stays False without a change."""
+    n, t, R = 200, np.arange(200) * 600.0, np.tile(np.eye(2), (200, 1, 1))
+    for seed in (0, 1):
+        rng = np.random.default_rng(seed)
+        x = np.cumsum(rng.normal(scale=0.1, size=(n, 2)), axis=0) + rng.normal(size=(n, 2))
+        asked = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2), order_test=True)
+        plain = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2))
+        assert asked.change is None and asked.throughout and not plain.throughout, (asked, plain)
+    for seed in range(10):
+        x = np.random.default_rng(100 + seed).normal(size=(n, 2))
+        assert not sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2), order_test=True).throughout
