@@ -9,9 +9,10 @@ A tag at a fixed place among 8 receivers (1 km × 0.8 km), a ping every 120 ± 2
 the pings): for ``--seeds`` still tags, the share of rows flagged and the mean 2-D NEES of the place against the
 truth with the covariance reported; the same tags' fixes under the permutation test of their order alone (the verdict
 before: :func:`sblsim.models.tracking.stationary.moved`); a tag moved 20 m at its 360th ping, where its rows are
-flagged ``tag_moved`` from (None where none is); a random walk of 2 m per ping (an animal); and the verdict's own
-time on 10⁴ fixes, still and moved
-(best of three). Prints a JSON line last.
+flagged ``tag_moved`` from (None where none is); a random walk of 2 m per ping (an animal); the share of its
+arrivals each one's place explains (``explained_share``: the still tags', the moved tags' still parts', the walks';
+their least, median and largest); and the verdict's own time on 10⁴ fixes, still and moved (best of three). Prints a
+JSON line last.
 
 The record varied the way real still tags' records differ: ``--interval`` the pings' interval [s] (uniform between
 the two: a sync tag's 540 660), ``--pings`` their count (a season's), ``--receivers`` the first K receivers alone (4
@@ -155,10 +156,11 @@ def measure(seeds: int, how: Record = Record()) -> dict:
     """The figures (module docstring) on records made as ``how`` says."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        nees, flagged, rows, order_moved, seconds = [], 0, 0, 0, []
+        nees, flagged, rows, order_moved, seconds, shares = [], 0, 0, 0, [], {"still": [], "moved": [], "walk": []}
         for seed in range(seeds):
             outcome, places, took = tracked(folder, seed, how=how)
             still = outcome.summary["motion"]["still"]
+            shares["still"].append(still["explained_share"])
             e = np.asarray(still["place"]) - places[0]
             nees.append(float(e @ np.linalg.solve(np.asarray(still["covariance"]), e)))
             flagged += int((outcome.track["quality"] == "flagged").sum())
@@ -173,15 +175,21 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             offsets.append(first - how.pings // 2 if reasons.any() else None)  # None: no row flagged tag_moved
             before_ok.append(bool((outcome.track["quality"].to_numpy()[:first] == "ok").all()))
             change = outcome.summary["motion"]["still"]["change"]  # None: the move not found (NaN)
+            shares["moved"].append(outcome.summary["motion"]["still"]["explained_share"])  # its still part's
             distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])) if change
                             else float("nan"))
-        animals = [tracked(folder, seed, walk=2.0, how=how)[0].summary["motion"]["still"]["verdict"]
-                   for seed in range(5)]
+        animals = []
+        for seed in range(5):
+            still = tracked(folder, seed, walk=2.0, how=how)[0].summary["motion"]["still"]
+            animals.append(still["verdict"])
+            shares["walk"].append(still["explained_share"])
     return {"record": str(how), "seeds": seeds, "rows": rows, "flagged": flagged, "share_flagged": flagged / rows,
             "nees_mean": float(np.mean(nees)), "nees_median": float(np.median(nees)),
             "order_test_moved": order_moved, "track_s_median": float(np.median(seconds)),
             "moved_first_flag_offsets": offsets, "moved_rows_before_ok": before_ok,
             "moved_second_place_error_m": distance, "animal_verdicts": animals,
+            "explained_share": {kind: [float(np.nanmin(v)), float(np.nanmedian(v)), float(np.nanmax(v))]
+                                for kind, v in shares.items()},
             "verdict_1e4_still_s": verdict_time(0.0), "verdict_1e4_moved_s": verdict_time(20.0)}
 
 
@@ -221,6 +229,9 @@ def main() -> None:
           " "
           f"the rows before ok {r['moved_rows_before_ok']}, the second place {second} m from where it went; a random "
           f"walk of 2 m per ping: {r['animal_verdicts']}")
+    said = "; ".join(f"{kind} {low:.3f} to {high:.3f} (median {mid:.3f})"
+                     for kind, (low, mid, high) in r["explained_share"].items())
+    print(f"the share of its arrivals each place explains (the moved tags' still parts'): {said}")
     print(f"the verdict on 10^4 fixes: {r['verdict_1e4_still_s']:.3f} s still, {r['verdict_1e4_moved_s']:.3f} s moved "
           "(best of three)")
     print(json.dumps(r))
