@@ -24,14 +24,15 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 #: (the verdict ``unchecked``), not called still.
 UNCHECKED_BELOW = 2 * sv.MIN_SEGMENT
 #: The least share of its arrivals a still tag's one place explains (each within the robust fit's kept residual at the
-#: stated timing noise: :func:`explained_share`; its still part's, where its fixes say it moved). Where fewer, the tag
-#: is neither still nor moved once: ``moving`` where its fixes say it moved or lie in an order in time its error terms
-#: do not make (:func:`~sblsim.models.tracking.still.wanders`), else ``unchecked`` (it moved where its few trusted fixes
-#: cannot tell it from their errors, or its timing noise is several times the stated). A still tag's place explains all
-#: its arrivals but its reflections (0.84 to 1.0 on the boats' reference and sync tags, 0.91 to 0.96 where a receiver
-#: hears a reflection 30 % of the time), a tag moved once half way 0.79 over its record and all before its move, a
-#: random walk of 2 m a ping on a bent canal's four receivers 0.36 to 0.49 (0.42 to 0.51 before a change its fixes
-#: found); a still tag whose timing noise is 7 times the stated 0.65, 10 times 0.53 to 0.55, 15 times 0.42 to 0.44.
+#: timing noise taken: :func:`explained_share`; its still part's, where its fixes say it moved). Where fewer, the tag is
+#: neither still nor moved once: ``moving`` where its fixes say it moved or lie in an order in time its error terms do
+#: not make (:func:`~sblsim.models.tracking.still.wanders`), else ``unchecked`` (it moved where its few trusted fixes
+#: cannot tell it from their errors, or its timing noise is several times the one taken). A still tag's place explains
+#: all its arrivals but its reflections (0.84 to 1.0 on the boats' reference and sync tags, at least 0.91 where a
+#: receiver hears a reflection 30 % of the time), a tag moved once half way 0.79 over its record and all before its
+#: move, a random walk of 2 m a ping on a bent canal's four receivers 0.36 to 0.49 (0.42 to 0.51 before a change its
+#: fixes found); a still tag whose timing noise is 7 times the stated 0.65, 10 times 0.53 to 0.55, 15 times 0.42 to
+#: 0.44.
 MIN_EXPLAINED = 0.5
 
 

@@ -95,11 +95,11 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
     m = s["motion"]
     still = m.get("still") or {}
     explains = (f"one place explains {100 * (still.get('explained_share') or 0):.0f} % of its arrivals at the timing "
-                f"noise stated, fewer than {100 * MIN_EXPLAINED:.0f} %")
+                f"noise taken, fewer than {100 * MIN_EXPLAINED:.0f} %")
     if still.get("verdict") == "unchecked" and still.get("scattered"):
         say(f"sblsim: warning: whether the tag moved is unchecked: {explains}, and its {still['trusted_fixes']} "
             "trusted single-ping fixes do not tell motion from their errors (it moved, or its timing noise is several "
-            "times the stated: give --toa-sigma); its place takes it as still, every row flagged motion_unchecked",
+            "times the one taken: give --toa-sigma); its place takes it as still, every row flagged motion_unchecked",
             True)
     elif still.get("verdict") == "unchecked":
         say(f"sblsim: warning: whether the tag moved is unchecked: {still['trusted_fixes']} trusted single-ping "
