@@ -185,22 +185,16 @@ class StillTag:
     summary: dict[str, Any]
 
 
-def explained_share(y: np.ndarray, positions: np.ndarray, c: float, pooled, sigma: np.ndarray) -> float:
-    """The share of a still tag's arrivals ``y`` (m, n) [s] (NaN where not heard) its one place ``pooled`` explains:
-    each ping's residuals at the place (its emission time their robust weighted mean, as the fit takes it) within
-    the robust fit's kept residual, ``(ν + 1) / w − ν`` in σ² at ν = :data:`~sblsim.models.tracking.smoother_cost.
-    ROBUST_DOF` and ``w`` = :data:`~sblsim.models.tracking.smoother.ROBUST_KEPT_WEIGHT` (6.1 σ) of the timing noise
-    ``sigma`` (n,) [s]; NaN where none was heard."""
+def explained_share(pooled, heard: np.ndarray) -> float:
+    """The share of a still tag's arrivals its one place ``pooled`` explains: of those ``heard`` (m, n), the ones its
+    robust fit kept (weight :data:`~sblsim.models.tracking.smoother.ROBUST_KEPT_WEIGHT` or more, the weights settled
+    at the place: a normalised residual within ``√((ν + 1) / w − ν)``, 6.1 σ of the timing noise at ν =
+    :data:`~sblsim.models.tracking.smoother_cost.ROBUST_DOF`, each ping's emission time the Student-t location of its
+    arrivals); NaN where none was heard."""
     from sblsim.models.tracking.smoother import ROBUST_KEPT_WEIGHT
-    from sblsim.models.tracking.smoother_cost import ROBUST_DOF
-    from sblsim.models.tracking.stationary import _centred, _geometry, _per_ping
 
-    heard = np.isfinite(y)
-    if not heard.any():
-        return float("nan")
-    emitted = _geometry(np.where(heard, y, 0.0), positions, c, pooled.position)[1]
-    z = _centred(emitted, _per_ping(np.where(heard, pooled.weights, 0.0), sigma)) / sigma
-    return float(np.mean(z[heard] ** 2 <= (ROBUST_DOF + 1.0) / ROBUST_KEPT_WEIGHT - ROBUST_DOF))
+    heard = np.asarray(heard, bool)
+    return float(np.mean(pooled.weights[heard] >= ROBUST_KEPT_WEIGHT)) if heard.any() else float("nan")
 
 
 def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
@@ -221,9 +215,8 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     spread = receivers_term(y, positions, c, pooled, sigma_toa)
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
     beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
-    sigma = np.broadcast_to(np.asarray(sigma_toa, float), (len(positions),))
     return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
-            fitted.speed_range(c) if fitted.knots else None, explained_share(y, positions, c, pooled, sigma))
+            fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)))
 
 
 def _beyond(spread: np.ndarray, own: np.ndarray) -> np.ndarray:
