@@ -44,10 +44,11 @@ def breaks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarr
 def clocks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarray, time: np.ndarray,
                       distance: np.ndarray, slowness: np.ndarray | None, used: np.ndarray, synchronised: np.ndarray,
                       reference: int, bin_width: float, keep: np.ndarray, scale: np.ndarray,
-                      steady: np.ndarray | None = None) -> ClockFit:
+                      steady: np.ndarray | None = None, arrivals: bool = True) -> ClockFit:
     """:func:`~sblsim.models.sync.clocks.fit_clocks` with the arrivals ``keep`` (n,) and the clock rows' noise
     ``scale`` (rows,) [s] of an earlier fit (no reweighting: e.g. a sync tag's arrivals left out), no sigmas, in
-    ``windows`` (:func:`fit_in_windows`); ``receiver`` the arrivals' clock rows."""
+    ``windows`` (:func:`fit_in_windows`; ``arrivals`` False: the clocks alone, no arrival's residual kept);
+    ``receiver`` the arrivals' clock rows."""
 
     def one(rows: np.ndarray) -> ClockFit:
         u = used[rows]
@@ -56,7 +57,7 @@ def clocks_in_windows(windows: Windows, receiver: np.ndarray, emission: np.ndarr
                           None if slowness is None else slowness[rows], u, linked, here, bin_width,
                           keep=keep[rows], scale=scale, sigmas=False, steady=steady)
 
-    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised), reference)
+    return fit_in_windows(one, windows, receiver, time, emission, len(synchronised), reference, arrivals)
 
 
 def _tied(receiver: np.ndarray, emission: np.ndarray, synchronised: np.ndarray, reference: int

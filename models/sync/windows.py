@@ -104,7 +104,8 @@ class _Piece:
 
 
 def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, receiver: np.ndarray,
-                   time: np.ndarray, emission: np.ndarray, n_rows: int, reference: int) -> ClockFit:
+                   time: np.ndarray, emission: np.ndarray, n_rows: int, reference: int, arrivals: bool = True
+                   ) -> ClockFit:
     """The clocks of a season fitted window by window and joined (the module docstring).
 
     Parameters
@@ -127,6 +128,11 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
         The receiver whose clock is the season's time base (its offsets 0). A window ``fit_one`` fits against
         another receiver's clock (the reference's recovered) is put on it by that receiver's offset carried from the
         last earlier window that synchronised it (the line through its offsets there).
+    arrivals : bool
+        False: the clocks alone (a refit whose arrivals' residuals nobody reads, e.g. a sync tag's leave-one-out):
+        each window's per-arrival arrays let go as soon as it is fitted, and the season's fit's ``residual``,
+        ``standardised``, ``kept`` and ``emission_time`` empty, ``clock`` None; its clocks, scales, slowness and
+        breaks are the same, so a refit's memory is one window's whatever the season's length.
 
     Returns
     -------
@@ -157,13 +163,21 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
             raise ModelError(f"{exc} (in the window from {max(lo, instant.min()):.0f} s to {min(hi, instant.max()):.0f}"
                              " s of the clocks' time base: fitted in windows, each window needs its own sync-tag "
                              "emissions heard by two receivers)") from None
+        if not arrivals:  # (its rows' arrays not held while the next windows are fitted)
+            fit = _clocks_only(fit)
         if not fits and _reference(fit) != reference:
             raise ModelError(f"sync: the reference receiver ({reference}) ties no other receiver in the season's first "
                              "window; allowed: a reference receiver in the water from the start (--reference)")
-        fits.append((i, rows, _carried(fit, fits, reference, lo) if fits else fit))
+        fits.append((i, rows if arrivals else None, _carried(fit, fits, reference, lo) if fits else fit))
     if not fits:
         raise ModelError("sync: no sync-tag arrival in any window; nothing to synchronise")
-    return _joined(fits, windows, np.asarray(receiver, np.int64), instant, emission, n_rows)
+    return _joined(fits, windows, np.asarray(receiver, np.int64), instant, emission, n_rows, arrivals)
+
+
+def _clocks_only(fit: ClockFit) -> ClockFit:
+    """A window's fit without its per-arrival arrays (:func:`fit_in_windows` ``arrivals=False``)."""
+    return replace(fit, emission_time=np.empty(0), residual=np.empty(0), standardised=np.empty(0),
+                   kept=np.empty(0, bool), clock=None, distance=None)
 
 
 def _reference(fit: ClockFit) -> int:
@@ -259,9 +273,10 @@ def _filled(values: np.ndarray, extend: bool) -> np.ndarray:
     return out
 
 
-def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, emission: np.ndarray, n_rows: int
-            ) -> ClockFit:
-    """The windows' fits joined into the season's (:func:`fit_in_windows`)."""
+def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, emission: np.ndarray, n_rows: int,
+            arrivals: bool = True) -> ClockFit:
+    """The windows' fits joined into the season's (:func:`fit_in_windows`; ``arrivals`` False: no arrival's
+    arrays)."""
     width = float(fits[0][2].edges[1] - fits[0][2].edges[0])
     low = min(float(f.edges[0]) for _, _, f in fits)
     n_bins = int(round((max(float(f.edges[-1]) for _, _, f in fits) - low) / width))
@@ -314,24 +329,25 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
         knots[out] = _filled(knots[out], extend=True)
         knot_sigma[out] = _filled(knot_sigma[out], extend=False)
     scale = np.where(scale_n > 0, np.sqrt(scale2 / np.maximum(scale_n, 1)), np.nan)
-    n = len(instant)
+    n = len(instant) if arrivals else 0
     residual, standardised, kept = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n, bool)
     clock = np.full(n, -1, np.int64)
-    emission_time = np.full(int(emission.max(initial=-1)) + 1, np.nan)
+    emission_time = np.full(int(emission.max(initial=-1)) + 1 if arrivals else 0, np.nan)
     breaks = []
     for i, rows, fit in fits:
         lo, hi = windows.span(i)
-        mine = (instant[rows] >= lo) & (instant[rows] < hi)
-        at = rows[mine]
-        residual[at], standardised[at], kept[at] = fit.residual[mine], fit.standardised[mine], fit.kept[mine]
-        local = receiver[at] if fit.clock is None else fit.clock[mine]  # each arrival's row in its window
-        lookup = np.full(len(fit.knots) + 1, -1, np.int64)  # (the last: a row set aside, -1)
-        for (w, r), out in where.items():
-            if w == i:
-                lookup[r] = out
-        clock[at] = lookup[np.where(local >= 0, local, -1)]
-        owned = np.unique(emission[at])
-        emission_time[owned] = fit.emission_time[owned]
+        if arrivals:
+            mine = (instant[rows] >= lo) & (instant[rows] < hi)
+            at = rows[mine]
+            residual[at], standardised[at], kept[at] = fit.residual[mine], fit.standardised[mine], fit.kept[mine]
+            local = receiver[at] if fit.clock is None else fit.clock[mine]  # each arrival's row in its window
+            lookup = np.full(len(fit.knots) + 1, -1, np.int64)  # (the last: a row set aside, -1)
+            for (w, r), out in where.items():
+                if w == i:
+                    lookup[r] = out
+            clock[at] = lookup[np.where(local >= 0, local, -1)]
+            owned = np.unique(emission[at])
+            emission_time[owned] = fit.emission_time[owned]
         for b in fit.breaks or []:
             instant_b = b.time if np.isfinite(b.time) else b.first
             if lo <= instant_b < hi:
@@ -344,7 +360,7 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
                    scale, slowness, slowness_sigma, max(f.iterations for _, _, f in fits))
     if plain:
         return fit
-    return replace(fit, site=site, span=span, clock=clock, breaks=breaks,
+    return replace(fit, site=site, span=span, clock=clock if arrivals else None, breaks=breaks,
                    part=part if (part > 1).any() else None)
 
 

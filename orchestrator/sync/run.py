@@ -386,6 +386,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
                            width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
                            fits, table_sigma, windows)
+    release()  # the sync tags' refits' freed buffers back to the system before the residuals' table is made
     refined = _positions(fit, positions, names, linked, identified, tag_names, float(survey_sigma)) \
         if refine_positions else None
     timings["leave_one_out"] = clock.perf_counter() - tick

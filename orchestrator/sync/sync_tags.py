@@ -194,8 +194,9 @@ def _fit_without(i: int, fit: ClockFit, c, tag, emission, time, distance, slowne
 
     def refit(given):
         if windows is not None:  # (positions fixed: the windows' fits are made without geometry)
+            # (its clocks alone: the refit's residuals are never read, and a season's of them not held)
             return clocks_in_windows(windows, c, emission, time, distance, given, without, still, start, width,
-                                     fit.kept, fit.scale, steady)
+                                     fit.kept, fit.scale, steady, arrivals=False)
         return fit_clocks(c, emission, time, distance, given, without, still, start, width, keep=fit.kept,
                           scale=fit.scale, sigmas=False, geometry=loo, steady=steady)
 

@@ -174,3 +174,31 @@ def test_the_time_base_carried_past_the_reference_receivers_recovery():
         base[name] = np.abs(fit.offset(receiver[late], t[late]) - sim.offset(receiver[late], logged[late], 0)).max()
     assert error["windows"] <= 1.05 * error["one"] and error["one"] < 1e-4
     assert base["windows"] < 0.2
+
+
+@pytest.mark.parametrize("jump_day", [None, pytest.param(6.0, marks=pytest.mark.slow)])
+def test_a_refit_for_its_clocks_alone_holds_no_arrivals_and_the_same_clocks(jump_day):
+    """A sync tag's leave-one-out refit asked for its clocks alone (``arrivals=False``, as ``sync_tags.csv``'s fits
+    are made) holds no arrival's array (a season's of them), and its clocks, sigmas, scales, sound speed and breaks
+    are those of the refit that keeps them, bit for bit; with receiver 2's clock broken too (its rows the season
+    fit's clock rows)."""
+    sim, origin, t, used, args, windows, whole, windowed = _season(jump_day, days=9.0)
+    receiver, emission, time, distance, slowness, _, linked, reference, width = args
+    rows = receiver if windowed.clock is None else windowed.clock
+    n_rows = len(windowed.knots)
+    without = used & (sim.tag != 3) & (rows >= 0)
+    still = connected(rows[without], emission[without], n_rows, reference)
+    steady = None if windowed.site is None else windowed.site == reference
+    fits = [clocks_in_windows(windows, rows, emission, time, distance, slowness, without, still, reference, width,
+                              windowed.kept, windowed.scale, steady, arrivals=a) for a in (True, False)]
+    kept, alone = fits
+    assert len(kept.residual) == len(t) and np.isfinite(kept.residual[without]).any()
+    for values in (alone.residual, alone.standardised, alone.kept, alone.emission_time):
+        assert values.size == 0
+    assert alone.clock is None
+    for name in ("edges", "knots", "knot_sigma", "drift", "drift_sigma", "counts", "scale"):
+        assert np.array_equal(getattr(kept, name), getattr(alone, name), equal_nan=name != "counts"), name
+    assert kept.slowness == alone.slowness
+    assert [b.time for b in kept.breaks or []] == [b.time for b in alone.breaks or []]
+    picked = without & (rows != reference)
+    assert np.array_equal(kept.offset(rows[picked], t[picked]), alone.offset(rows[picked], t[picked]))
