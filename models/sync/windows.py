@@ -174,10 +174,15 @@ def fit_in_windows(fit_one: Callable[[np.ndarray], ClockFit], windows: Windows, 
     return _joined(fits, windows, np.asarray(receiver, np.int64), instant, emission, n_rows, arrivals)
 
 
+def _no_arrivals() -> dict:
+    """A fit's per-arrival fields, empty (:func:`fit_in_windows` ``arrivals=False``)."""
+    return {"emission_time": np.empty(0), "residual": np.empty(0), "standardised": np.empty(0),
+            "kept": np.empty(0, bool), "clock": None}
+
+
 def _clocks_only(fit: ClockFit) -> ClockFit:
     """A window's fit without its per-arrival arrays (:func:`fit_in_windows` ``arrivals=False``)."""
-    return replace(fit, emission_time=np.empty(0), residual=np.empty(0), standardised=np.empty(0),
-                   kept=np.empty(0, bool), clock=None, distance=None)
+    return replace(fit, distance=None, **_no_arrivals())
 
 
 def _reference(fit: ClockFit) -> int:
@@ -329,25 +334,10 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
         knots[out] = _filled(knots[out], extend=True)
         knot_sigma[out] = _filled(knot_sigma[out], extend=False)
     scale = np.where(scale_n > 0, np.sqrt(scale2 / np.maximum(scale_n, 1)), np.nan)
-    n = len(instant) if arrivals else 0
-    residual, standardised, kept = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n, bool)
-    clock = np.full(n, -1, np.int64)
-    emission_time = np.full(int(emission.max(initial=-1)) + 1 if arrivals else 0, np.nan)
+    rows_of = _arrivals_joined(fits, windows, where, receiver, instant, emission) if arrivals else _no_arrivals()
     breaks = []
-    for i, rows, fit in fits:
+    for i, _, fit in fits:
         lo, hi = windows.span(i)
-        if arrivals:
-            mine = (instant[rows] >= lo) & (instant[rows] < hi)
-            at = rows[mine]
-            residual[at], standardised[at], kept[at] = fit.residual[mine], fit.standardised[mine], fit.kept[mine]
-            local = receiver[at] if fit.clock is None else fit.clock[mine]  # each arrival's row in its window
-            lookup = np.full(len(fit.knots) + 1, -1, np.int64)  # (the last: a row set aside, -1)
-            for (w, r), out in where.items():
-                if w == i:
-                    lookup[r] = out
-            clock[at] = lookup[np.where(local >= 0, local, -1)]
-            owned = np.unique(emission[at])
-            emission_time[owned] = fit.emission_time[owned]
         for b in fit.breaks or []:
             instant_b = b.time if np.isfinite(b.time) else b.first
             if lo <= instant_b < hi:
@@ -356,12 +346,39 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
     slowness, slowness_sigma = _slowness(fits)
     plain = len(order) == n_rows and not breaks and np.isinf(span).all()  # one row per receiver, as one fit's
     drift = np.diff(knots, axis=1) / width
-    fit = ClockFit(edges, knots, knot_sigma, drift, drift_sigma, counts, emission_time, residual, standardised, kept,
-                   scale, slowness, slowness_sigma, max(f.iterations for _, _, f in fits))
+    fit = ClockFit(edges, knots, knot_sigma, drift, drift_sigma, counts, rows_of["emission_time"], rows_of["residual"],
+                   rows_of["standardised"], rows_of["kept"], scale, slowness, slowness_sigma,
+                   max(f.iterations for _, _, f in fits))
     if plain:
         return fit
-    return replace(fit, site=site, span=span, clock=clock if arrivals else None, breaks=breaks,
+    return replace(fit, site=site, span=span, clock=rows_of["clock"], breaks=breaks,
                    part=part if (part > 1).any() else None)
+
+
+def _arrivals_joined(fits, windows: Windows, where: dict, receiver: np.ndarray, instant: np.ndarray,
+                     emission: np.ndarray) -> dict:
+    """The season's per-arrival fields (:func:`_no_arrivals`' keys) from the windows' fits: each arrival's residual,
+    standardised residual, kept flag and clock row (the season's row its window's row was joined into: ``where``)
+    its emission's window's, and each emission's time its window's."""
+    n = len(instant)
+    residual, standardised, kept = np.full(n, np.nan), np.full(n, np.nan), np.zeros(n, bool)
+    clock = np.full(n, -1, np.int64)
+    emission_time = np.full(int(emission.max(initial=-1)) + 1, np.nan)
+    for i, rows, fit in fits:
+        lo, hi = windows.span(i)
+        mine = (instant[rows] >= lo) & (instant[rows] < hi)
+        at = rows[mine]
+        residual[at], standardised[at], kept[at] = fit.residual[mine], fit.standardised[mine], fit.kept[mine]
+        local = receiver[at] if fit.clock is None else fit.clock[mine]  # each arrival's row in its window
+        lookup = np.full(len(fit.knots) + 1, -1, np.int64)  # (the last: a row set aside, -1)
+        for (w, r), out in where.items():
+            if w == i:
+                lookup[r] = out
+        clock[at] = lookup[np.where(local >= 0, local, -1)]
+        owned = np.unique(emission[at])
+        emission_time[owned] = fit.emission_time[owned]
+    return {"emission_time": emission_time, "residual": residual, "standardised": standardised, "kept": kept,
+            "clock": clock}
 
 
 def _row_for(where: dict, site: np.ndarray, span: np.ndarray, i: int, b, before: bool) -> int:

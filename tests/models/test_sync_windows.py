@@ -189,9 +189,8 @@ def test_a_refit_for_its_clocks_alone_holds_no_arrivals_and_the_same_clocks(jump
     without = used & (sim.tag != 3) & (rows >= 0)
     still = connected(rows[without], emission[without], n_rows, reference)
     steady = None if windowed.site is None else windowed.site == reference
-    fits = [clocks_in_windows(windows, rows, emission, time, distance, slowness, without, still, reference, width,
-                              windowed.kept, windowed.scale, steady, arrivals=a) for a in (True, False)]
-    kept, alone = fits
+    kept, alone = (clocks_in_windows(windows, rows, emission, time, distance, slowness, without, still, reference,
+                                     width, windowed.kept, windowed.scale, steady, arrivals=a) for a in (True, False))
     assert len(kept.residual) == len(t) and np.isfinite(kept.residual[without]).any()
     for values in (alone.residual, alone.standardised, alone.kept, alone.emission_time):
         assert values.size == 0
