@@ -22,8 +22,6 @@ from sblsim.models.sync.scale import (
     looks_like_degrees,
 )
 from sblsim.models.tracking.strays import stable_interval
-from sblsim.orchestrator.readers.transmitters import match
-from sblsim.orchestrator.sync.clock_tables import _reasons
 
 #: What a refusal of the receivers' positions allows.
 ALLOWED = ("positions in metres (x_m, y_m in a local frame or a projected CRS), or latitude and longitude as lat, "
@@ -35,46 +33,49 @@ SPREAD_FACTOR = 1.5
 PROBE_WINDOW = 5.0
 
 
-def sync_scale(residuals: pd.DataFrame, receivers: pd.DataFrame, table: pd.DataFrame, sound_speed: float | None,
-               quantum: float = 0.0) -> Scale | None:
+def sync_scale(receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, time: np.ndarray, echo: np.ndarray,
+               names: list[str], tag_names: list[str], tag_home: np.ndarray, table: pd.DataFrame,
+               sound_speed: float | None, quantum: float = 0.0) -> Scale | None:
     """The factor between the sync tags' clock-free travel times and a receivers table's distances
     (:mod:`sblsim.models.sync.scale`: double differences of the raw arrivals), or None where too few.
 
     Parameters
     ----------
-    residuals : pandas.DataFrame
-        The sync tags' arrivals (a synchronisation's ``residuals.csv``): ``receiver``, ``tag``, ``emission``,
-        ``time`` (raw [s]) and ``reason`` (``multipath`` left out).
-    receivers : pandas.DataFrame
-        Its receivers: ``receiver``, ``sync_tag`` (each tag's home).
+    receiver, tag, emission : numpy.ndarray of int, (n,)
+        The sync tags' arrivals: each one's receiver (an index into ``names``), sync tag (into ``tag_names``) and
+        emission.
+    time : numpy.ndarray, (n,)
+        [s] each arrival on its receiver's own clock.
+    echo : numpy.ndarray of bool, (n,)
+        A multipath echo (left out).
+    names, tag_names : list of str
+        The receivers' and the sync tags' names.
+    tag_home : numpy.ndarray of int, (tags,)
+        Each sync tag's receiver (its home: an index into ``names``).
     table : pandas.DataFrame
-        The receivers as the table gives them (never refined): ``receiver``, ``x``, ``y``, ``z`` [m; z NaN: 2-D].
+        The receivers as the table gives them (never refined): ``receiver``, ``x``, ``y``, ``z`` [m; z NaN: 2-D];
+        a receiver or a tag's home not in it left out.
     sound_speed : float or None
         [m/s] the one given (a series' median), else :data:`NOMINAL_SOUND_SPEED`.
     quantum : float
         [s] the times' rounding (:func:`sblsim.models.sync.resolution.time_quantum`; 0: none).
     """
-    use = residuals[residuals["reason"] != "multipath"]
-    names = table["receiver"].tolist()
-    index = {n: k for k, n in enumerate(names)}
-    detected = use["tag"].unique()
-    home = {}
-    for name, tag in zip(receivers["receiver"], receivers["sync_tag"]):
-        if tag:
-            found = match(str(tag), detected) or str(tag)
-            home[found] = index.get(name)
-    use = use[use["tag"].map(lambda t: home.get(t) is not None) & use["receiver"].isin(index)]
-    if not len(use):
+    index = {n: k for k, n in enumerate(table["receiver"].tolist())}
+    at = np.array([index.get(n, -1) for n in names], np.int64)  # each receiver's row of the table (-1: none)
+    home = at[np.asarray(tag_home, np.int64)]  # (a season's arrivals never copied into a frame: arrays alone)
+    use = ~np.asarray(echo, bool) & (home[tag] >= 0) & (at[receiver] >= 0)
+    if not use.any():
         return None
     xyz = table[["x", "y", "z"]].to_numpy(float)
     positions = xyz if np.isfinite(xyz[:, 2]).all() else xyz[:, :2]
-    receiver = use["receiver"].map(index).to_numpy(np.int64)
-    tags = sorted(set(use["tag"]))
-    tag = use["tag"].map({t: k for k, t in enumerate(tags)}).to_numpy(np.int64)
-    homes = np.array([home[t] for t in tags], np.int64)
-    distance = np.linalg.norm(positions[homes[tag]] - positions[receiver], axis=1)
-    acoustic, predicted, pair = double_differences(receiver, tag, use["emission"].to_numpy(np.int64),
-                                                   use["time"].to_numpy(float), distance,
+    row = at[receiver[use]]
+    present = np.unique(tag[use])  # the tags numbered in their names' order
+    rank = np.zeros(len(tag_names), np.int64)
+    rank[sorted(present, key=lambda k: tag_names[k])] = np.arange(len(present))
+    mine = tag[use]
+    distance = np.linalg.norm(positions[home[mine]] - positions[row], axis=1)
+    acoustic, predicted, pair = double_differences(row, rank[mine], np.asarray(emission, np.int64)[use],
+                                                   np.asarray(time, float)[use], distance,
                                                    sound_speed or NOMINAL_SOUND_SPEED, quantum)
     return distance_scale(acoustic, predicted, pair)
 
@@ -179,12 +180,14 @@ def check_arrival_spread(spreads: np.ndarray, crossing: float, tolerance: float,
 
 
 def checks_before_fit(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame, receivers_file: str | None,
-                      names: list[str], tag_names: list[str], receiver: np.ndarray, tag: np.ndarray,
-                      emission: np.ndarray, duplicate: np.ndarray, positions: np.ndarray, sound_speed: float | None,
-                      series: tuple[np.ndarray, np.ndarray] | None, alternatives: dict[str, pd.DataFrame]
+                      names: list[str], tag_names: list[str], tag_home: np.ndarray, receiver: np.ndarray,
+                      tag: np.ndarray, emission: np.ndarray, duplicate: np.ndarray, positions: np.ndarray,
+                      sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
+                      alternatives: dict[str, pd.DataFrame]
                       ) -> list[str]:
     """The checks before the clocks are fitted (:func:`~sblsim.orchestrator.sync.run.synchronise`'s docstring) on
-    the sync tags' arrivals (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo), at
+    the sync tags' arrivals (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo; each
+    tag's home receiver ``tag_home``), at
     the sound speed given (a series' median), else the water's nominal: the table's distances weighed against the
     travel times (a table of degrees too small to weigh refused first), the times' rounding against the travel time
     across the array (the table's at the travel times' own scale: a table in another unit is never taken for a
@@ -194,10 +197,8 @@ def checks_before_fit(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame
     times = sync["time"].to_numpy(float)
     given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
     speed = given or NOMINAL_SOUND_SPEED
-    arrivals = pd.DataFrame({"receiver": np.array(names, dtype=object)[receiver],
-                             "tag": np.array(tag_names, dtype=object)[tag], "emission": emission, "time": times,
-                             "reason": _reasons(np.where(duplicate, 1, 0))})
-    found = sync_scale(arrivals, hydrophones, hydrophones, given, time_quantum(times))
+    arrays = (receiver, tag, emission, times, duplicate, names, tag_names, tag_home)
+    found = sync_scale(*arrays, hydrophones, given, time_quantum(times))
     where = "receivers" if receivers_file is None else f"receivers {receivers_file!r}"
     if found is None:
         check_sync_positions(None, hydrophones, where, given)
@@ -208,7 +209,7 @@ def checks_before_fit(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame
         said = check_sync_positions(found, hydrophones, where, given) if found is not None else None
     except ModelError as refused:
         for cause, table in alternatives.items():
-            other = sync_scale(arrivals, hydrophones, table, given, time_quantum(times))
+            other = sync_scale(*arrays, table, given, time_quantum(times))
             if other is not None and abs(other.scale - 1.0) <= SPEED_TOLERANCE:
                 raise ModelError(f"{where}: the sync tags' travel times fit the positions with {cause} (the "
                                  f"distances by sound {other.scale:.3f} times the table's then), not as given "

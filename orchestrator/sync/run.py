@@ -296,8 +296,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     positions = xyz[:, :dim]
     distance = np.linalg.norm(positions[tag_home[tag]] - positions[receiver], axis=1)
     # said or refused before the work: the table's unit and the times' rounding
-    notes_first = checks_before_fit(sync, detections.source, hydrophones, receivers_file, names, tag_names, receiver,
-                                    tag, emission, duplicate, positions, sound_speed, series, alternatives or {})
+    notes_first = checks_before_fit(sync, detections.source, hydrophones, receivers_file, names, tag_names, tag_home,
+                                    receiver, tag, emission, duplicate, positions, sound_speed, series,
+                                    alternatives or {})
     resets, line = _resets(detections, sync), sync["line"].to_numpy()
     del sync  # (a copy of the season's sync-tag rows, not held through the fit)
 
