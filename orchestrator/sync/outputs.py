@@ -87,8 +87,8 @@ def figures(outcome: SyncOutcome) -> dict:
 
 def _kept_by_receiver(residuals) -> tuple[dict[str, np.ndarray], dict[tuple[str, str], int]]:
     """The kept arrivals' residuals [m] by receiver (each in the rows' order) and their count by sync tag and
-    receiver, from the receivers' and tags' codes (a season's rows never copied into a frame of the kept ones, nor grouped by
-    their names: at 13 weeks the figures' tables were 0.2 GiB)."""
+    receiver, from the receivers' and tags' codes (a season's rows never copied into a frame of the kept ones, nor
+    grouped by their names: at 13 weeks the figures' tables were 0.2 GiB)."""
     kept = residuals["kept"].to_numpy(bool)
     at, receivers = pd.factorize(residuals["receiver"])
     of, tags = pd.factorize(residuals["tag"])
@@ -98,7 +98,8 @@ def _kept_by_receiver(residuals) -> tuple[dict[str, np.ndarray], dict[tuple[str,
         mine = kept & (at == k)
         if mine.any():
             drawn[str(name)] = values[mine]
-            pairs |= {(tags[j], name): int(n) for j, n in enumerate(np.bincount(of[mine], minlength=len(tags))) if n}
+            heard = np.bincount(of[mine], minlength=len(tags))
+            pairs |= {(tags[j], name): int(n) for j, n in enumerate(heard) if n}
     return drawn, pairs
 
 

@@ -1,7 +1,7 @@
-"""The receivers table's scale against the sync tags' travel times (:func:`sblsim.orchestrator.sync.declared.sync_scale`)
-taken from the arrivals' arrays alone: the same factor as the arrivals filtered and numbered in a table of names
-(pandas, in the test), whatever the table's order, with echoes, a receiver the table lacks and a tag whose home it
-lacks left out."""
+"""The receivers table's scale against the sync tags' travel times
+(:func:`sblsim.orchestrator.sync.declared.sync_scale`) taken from the arrivals' arrays alone: the same factor as the
+arrivals filtered and numbered in a table of names (pandas, in the test), whatever the table's order, with echoes, a
+receiver the table lacks and a tag whose home it lacks left out."""
 
 from __future__ import annotations
 
