@@ -40,7 +40,7 @@ from sblsim.models.sync.resolution import residual_warning, time_quantum
 from sblsim.models.sync.season import breaks_in_windows
 from sblsim.models.sync.windows import OVERLAP_HOURS, WINDOW_DAYS, season_windows
 from sblsim.orchestrator.io.arguments import whole
-from sblsim.orchestrator.io.memory import release
+from sblsim.orchestrator.io.memory import emptied, release
 from sblsim.orchestrator.readers.detections import Detections, reset_line
 from sblsim.orchestrator.readers.transmitters import match
 from sblsim.orchestrator.sync import segments
@@ -121,7 +121,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
                 reference: str | None = None, leave_one_out: bool = True, refine_positions: bool = False,
                 survey_sigma: float | Mapping[str, float] | None = None, timings: dict | None = None,
                 receivers_file: str | None = None, alternatives: dict[str, pd.DataFrame] | None = None,
-                window_days: float | None = WINDOW_DAYS, take_seen: bool = True) -> SyncOutcome:
+                window_days: float | None = WINDOW_DAYS, take_seen: bool = True,
+                release_rows: bool = False) -> SyncOutcome:
     """Synchronise the receivers' clocks (the module docstring).
 
     Before the clocks are fitted (once the sync tags' arrivals are grouped into emissions) the times' rounding is
@@ -168,6 +169,10 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
         (``summary["survey_sigma_from"]`` ``"seen"``), else exact.
     take_seen : bool
         False: the survey error seen is said, not taken (a study whose positions are refined next).
+    release_rows : bool
+        ``detections``' rows emptied (:func:`~sblsim.orchestrator.io.memory.emptied`) once the sync tags' arrivals
+        are taken from them and checked: the caller reads them no more, and a season's rows are not held through the
+        fit. Not with ``refine_positions`` (two synchronisations read them).
     timings : dict, optional
         Filled with each stage's seconds (``grouping``, ``fit`` and the fit's own stages, ``leave_one_out``,
         ``tables``) for a benchmark (the refined synchronisation's).
@@ -204,7 +209,8 @@ def synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed: 
             survey_sigma
         outcome = _synchronise(*args, timings=timings, table_sigma=None if not each and table == 0 else table,
                                receivers_file=receivers_file, alternatives=alternatives, window_days=window_days,
-                               survey="taken" if survey_sigma is None and take_seen else "said")
+                               survey="taken" if survey_sigma is None and take_seen else "said",
+                               release_rows=release_rows)
         if survey_sigma is not None:  # said where stated (the sync tags' NEES holds it)
             outcome.summary |= {"survey_sigma_m": dict(survey_sigma) if each else float(survey_sigma),
                                 "survey_sigma_from": "stated"}
@@ -226,7 +232,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                  survey_sigma: float = SURVEY_SIGMA, timings: dict | None = None,
                  table_sigma: float | np.ndarray | None = None, receivers_file: str | None = None,
                  alternatives: dict[str, pd.DataFrame] | None = None, window_days: float | None = None,
-                 survey: str | None = None) -> SyncOutcome:
+                 survey: str | None = None, release_rows: bool = False) -> SyncOutcome:
     """One synchronisation, with the positions refined (only where the sync tags determine them: else refused) or
     the table's (the sync tags' NEES with ``table_sigma`` [m] per axis as the table's error where given); the rest
     as :func:`synchronise` (its parameters, ``table_sigma`` and ``survey`` aside). ``survey`` ``"said"``: the survey
@@ -300,7 +306,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                                     receiver, tag, emission, duplicate, positions, sound_speed, series,
                                     alternatives or {})
     resets, line = _resets(detections, sync), sync["line"].to_numpy()
-    del sync  # (a copy of the season's sync-tag rows, not held through the fit)
+    del sync, frame  # (a copy of the season's sync-tag rows, not held through the fit)
+    if release_rows:  # nor the caller's rows (it reads them no more)
+        detections.frame = emptied(detections.frame)
 
     if sound_speed is not None:
         slowness, speed_source = np.full(len(time), 1.0 / sound_speed), "given"

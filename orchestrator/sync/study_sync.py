@@ -17,6 +17,7 @@ from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.models.sync.windows import WINDOW_DAYS
+from sblsim.orchestrator.io.memory import emptied
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
@@ -48,7 +49,8 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     (:func:`~sblsim.orchestrator.readers.in_water.in_water`: the frame chosen again over them where it was chosen
     automatically; the others listed in ``summary["receivers_file"]``), the frame and the deployments in
     ``summary["receivers_file"]``, and the refined positions (``positions.csv``) in latitude and longitude too where
-    the frame is known; ``options`` as :func:`synchronise` takes them.
+    the frame is known; ``options`` as :func:`synchronise` takes them (``release_rows``: ``detections``' rows
+    emptied once assigned, and the assigned ones once the synchronisation has taken its arrivals).
 
     Raises
     ------
@@ -57,6 +59,8 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     """
     array = in_water(detections, assign(detections, deployments), deployments)  # the deployments that logged it
     deployments, assigned = array.deployments, array.assigned
+    if options.get("release_rows"):  # the rows as read let go too: the assigned ones are the synchronisation's
+        detections.frame = emptied(detections.frame)
     outcome = synchronise(assigned.detections, assigned.hydrophones, sound_speed, series, bin_hours, reference,
                           alternatives=deployments.alternatives(), **options)
     outcome.summary["set_aside"] = assigned.set_aside
@@ -102,7 +106,8 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     # off said) and the times' rounding against the array, before the clocks are fitted (run.synchronise)
     return synchronise_study(data, deployments, sound_speed, series, bin_hours, reference,
                              refine_positions=refine_positions, survey_sigma=survey_sigma,
-                             receivers_file=deployments.source, window_days=window_days or None)
+                             receivers_file=deployments.source, window_days=window_days or None,
+                             release_rows=True)  # (read here: no caller reads them)
 
 
 

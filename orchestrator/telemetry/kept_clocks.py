@@ -94,7 +94,7 @@ def _read(entry: Path) -> tuple[SyncOutcome, dict[str, Any]]:
 
 def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, deployments, sound_speed: float | None,
                       series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
-                      survey_sigma: float | None = None, take_seen: bool = True):
+                      survey_sigma: float | None = None, take_seen: bool = True, release_rows: bool = False):
     """:func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks`, its synchronisation taken from ``resume``
     where a run of the same output kept it for what it reads (:func:`clocks_key`), else made and kept there.
 
@@ -105,7 +105,7 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
     """
     if resume is None or sync_dir is not None:
         return study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours, notes, survey_sigma,
-                            take_seen)
+                            take_seen, release_rows)
     key = clocks_key(assigned, sound_speed, series, bin_hours, survey_sigma, take_seen)
     kept = resume.fetch(key, _read)
     if kept is not None:
@@ -114,7 +114,7 @@ def kept_study_clocks(resume: Resume | None, sync_dir: Path | None, assigned, de
         notes.extend(outcome.summary.get("warnings", []))
         return offsets_clocks(outcome.offsets), assigned.hydrophones, info, outcome
     clocks, table, info, outcome = study_clocks(sync_dir, assigned, deployments, sound_speed, series, bin_hours,
-                                                notes, survey_sigma, take_seen)
+                                                notes, survey_sigma, take_seen, release_rows)
     if outcome is not None:
         resume.store(key, lambda entry: _write(entry, outcome, info))
     return clocks, table, info, outcome

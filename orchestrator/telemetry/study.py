@@ -310,8 +310,10 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
         track (else the stated survey's)."""
         scored = stated if survey is None else survey
+        # a store's sync-tag rows (the assigned rows, each tag's read from the store) let go once synchronised
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
-                                                               series, bin_hours, notes, scored, not refine_positions)
+                                                               series, bin_hours, notes, scored, not refine_positions,
+                                                               light and stored)
         taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
         survey, taken = (taken, None) if survey is None and isinstance(taken, dict) else (survey, taken)  # by receiver
         scored = taken if survey is None else survey

@@ -23,11 +23,12 @@ TOO_COARSE = "as logged (times too coarse to synchronise)"
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
                  series: tuple[np.ndarray, np.ndarray] | None, bin_hours: float, notes: list[str],
-                 survey_sigma: float | None = None, take_seen: bool = True):
+                 survey_sigma: float | None = None, take_seen: bool = True, release_rows: bool = False):
     """A study's clocks (:mod:`sblsim.orchestrator.telemetry.study`, step 2): the clocks, the receivers table they go
     with, what was done, and the synchronisation made here (or None); ``survey_sigma`` [m] the survey's stated
     error, in the sync tags' NEES (:func:`~sblsim.orchestrator.sync.run.synchronise`; none stated: the error its
-    residuals show, taken where seen unless ``take_seen`` is False).
+    residuals show, taken where seen unless ``take_seen`` is False); ``release_rows``: ``assigned``'s rows emptied
+    once the synchronisation has taken its arrivals from them (the study reads them no more).
 
     Raises
     ------
@@ -54,7 +55,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         try:
             outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours,
                                   receivers_file=deployments.source, alternatives=deployments.alternatives(),
-                                  survey_sigma=survey_sigma, take_seen=take_seen)
+                                  survey_sigma=survey_sigma, take_seen=take_seen, release_rows=release_rows)
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
         else:

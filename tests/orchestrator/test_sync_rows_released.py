@@ -1,0 +1,30 @@
+"""The synchronisation lets its caller's rows go when asked (:func:`sblsim.orchestrator.sync.run.synchronise`'s
+``release_rows``: a season's rows not held through the fit): the rows emptied, their columns and dtypes kept, and the
+same clocks, residuals and sync tags as a synchronisation that keeps them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from sblsim.models.sync.simulate import simulate_sync
+from sblsim.orchestrator.readers.detections import Detections
+from sblsim.orchestrator.sync.run import synchronise
+
+EPOCH = 1_700_000_000
+
+
+def test_the_rows_let_go_once_taken_and_the_same_synchronisation():
+    sim = simulate_sync(n_receivers=5, hours=1.0, seed=7)
+    frame = pd.DataFrame({"receiver": [f"R{j}" for j in sim.receiver], "tag": [f"S{i}" for i in sim.tag],
+                          "time": sim.time + EPOCH, "line": np.arange(2, len(sim.time) + 2)})
+    hydrophones = pd.DataFrame({"receiver": [f"R{j}" for j in range(5)], "sync_tag": [f"S{j}" for j in range(5)],
+                                "x": sim.positions[:, 0], "y": sim.positions[:, 1], "z": np.nan})
+    kept, released = Detections(frame.copy(), "simulated", "yaps"), Detections(frame.copy(), "simulated", "yaps")
+    options = {"sound_speed": sim.sound_speed, "reference": "R0"}
+    expected = synchronise(kept, hydrophones, **options)
+    got = synchronise(released, hydrophones, release_rows=True, **options)
+    assert len(kept.frame) == len(frame) and len(released.frame) == 0
+    assert released.frame.dtypes.to_dict() == frame.dtypes.to_dict()
+    for name in ("offsets", "residuals", "sync_tags"):
+        pd.testing.assert_frame_equal(getattr(got, name), getattr(expected, name))
