@@ -116,8 +116,7 @@ class StudyOutcome:
         ``positions.csv``: the receivers' positions refined from the moving tags (with ``refine_positions``;
         :class:`~.study_positions.StudyRefinement`).
     written : set of str
-        The tags' folders whose track files are written already (``write_tags``: their outcomes hold their track
-        alone, their matrices no rows).
+        The tags' folders written already (``write_tags``: their outcomes hold their track alone, matrices no rows).
     parts : TrackParts or None
         ``tracks.csv`` a tag at a time from the tags' own files (``keep_tracks`` False: the outcomes hold no track).
     """
@@ -310,7 +309,6 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
         track (else the stated survey's)."""
         scored = stated if survey is None else survey
-        # a store's sync-tag rows (the assigned rows, each tag's read from the store) let go once synchronised
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored, not refine_positions,
                                                                light and stored)
@@ -385,7 +383,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
                                                                                  code)
             rows[name] = row
-        stored_rows = None  # (the last tag's rows)
+        stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already, as synchronised)
         if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
             assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
         for i in sorted(built):  # in the order asked, whatever the order read
