@@ -95,6 +95,7 @@ def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
     try:
         yield
     finally:
+        release()  # what the block freed handed back before the table is read into it
         try:  # each column's Arrow buffers let go as it is converted, and what the reading freed handed back
             setattr(holder, name, pd.read_parquet(where / f"{name}.parquet",
                                                   to_pandas_kwargs={"self_destruct": True, "split_blocks": True}))

@@ -185,15 +185,14 @@ def checks_before_fit(sync: pd.DataFrame, source: str, hydrophones: pd.DataFrame
                       sound_speed: float | None, series: tuple[np.ndarray, np.ndarray] | None,
                       alternatives: dict[str, pd.DataFrame]
                       ) -> list[str]:
-    """The checks before the clocks are fitted (:func:`~sblsim.orchestrator.sync.run.synchronise`'s docstring) on
-    the sync tags' arrivals (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo; each
-    tag's home receiver ``tag_home``), at
-    the sound speed given (a series' median), else the water's nominal: the table's distances weighed against the
-    travel times (a table of degrees too small to weigh refused first), the times' rounding against the travel time
-    across the array (the table's at the travel times' own scale: a table in another unit is never taken for a
-    rounding), then the table's verdict, naming ``receivers_file`` (None: the receivers), and where it refuses the
-    table, the first of ``alternatives`` (another reading of the positions) whose distances the travel times take
-    named as the cause. Returns the lines said (a table slightly off)."""
+    """The checks before the clocks are fitted (:func:`~sblsim.orchestrator.sync.run.synchronise`'s docstring) on the
+    sync tags' arrivals (``sync``'s rows, each one's receiver, tag, emission and whether a multipath echo; each tag's
+    home receiver ``tag_home``), at the sound speed given (a series' median), else the water's nominal: the table's
+    distances weighed against the travel times (a table of degrees too small to weigh refused first), the times'
+    rounding against the travel time across the array (the table's at the travel times' own scale: a table in another
+    unit is never taken for a rounding), then the table's verdict, naming ``receivers_file`` (None: the receivers), and
+    where it refuses the table, the first of ``alternatives`` (another reading of the positions) whose distances the
+    travel times take named as the cause. Returns the lines said (a table slightly off)."""
     times = sync["time"].to_numpy(float)
     given = sound_speed if sound_speed is not None else None if series is None else float(np.median(series[1]))
     speed = given or NOMINAL_SOUND_SPEED

@@ -23,7 +23,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from sblsim.orchestrator.io.memory import spilled
+from sblsim.orchestrator.io.memory import release, spilled
 from sblsim.orchestrator.readers.in_water import SAID
 from sblsim.orchestrator.sync.outputs import plain
 from sblsim.orchestrator.sync.outputs import write as write_sync
@@ -314,6 +314,7 @@ def write_study(outcome: StudyOutcome, folder: Path) -> None:
     matrices): each tracked tag's track files, the synchronisation made, then the study's own files."""
     import matplotlib.pyplot as plt
 
+    release()  # what the study's last steps freed (the reference tags' scores: 0.1 GiB at 13 weeks) handed back first
     for name, tag in outcome.outcomes.items():
         if name not in outcome.written:  # (the others written as they ended)
             write(tag, folder / name)

@@ -383,7 +383,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
                                                                                  code)
             rows[name] = row
-        stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already, as synchronised)
+        stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already where synchronised here)
         if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
             assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
         for i in sorted(built):  # in the order asked, whatever the order read
