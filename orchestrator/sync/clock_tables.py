@@ -47,8 +47,10 @@ def _offsets(fit: ClockFit, names: list[str], linked: np.ndarray, bridged: np.nd
 
 
 def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged, residuals,
-             sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections, dim, wall) -> dict[str, Any]:
-    """``sync.json``: the model, per receiver and bin the offset, drift and their sigmas, and the diagnostics."""
+             sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections, rows, dim, wall
+             ) -> dict[str, Any]:
+    """``sync.json``: the model, per receiver and bin the offset, drift and their sigmas, and the diagnostics;
+    ``rows`` the detections' rows read (counted before they were let go)."""
     per_receiver = {}
     edges = (fit.edges + origin).tolist()
     for j, name in enumerate(names):
@@ -103,7 +105,7 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
         "model": "piecewise-linear clock offset per receiver, continuous across time bins (drift constant in a bin), "
                  "the reference receiver fixed, sync-tag emission times unknown; robust IRLS (Student-t, nu=3) then "
                  "arrivals beyond 4 sigma rejected (Baktoft et al. 2017, Sci. Rep. 7:14294; YAPS's sync model)",
-        "detections": {"file": detections.source, "format": detections.format, "rows": int(len(detections.frame)),
+        "detections": {"file": detections.source, "format": detections.format, "rows": int(rows),
                        "sync_arrivals": int(len(receiver)), "used": int(used.sum()), "kept": int(kept.sum()),
                        "multipath": int(duplicate.sum()), "single_receiver": int(single.sum()),
                        "ignored_columns": detections.ignored_columns},

@@ -250,6 +250,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         No sync tag heard by two receivers, a reference receiver not in the table or not synchronisable.
     """
     started, notes, frame = clock.perf_counter(), [], detections.frame
+    rows_read = len(frame)  # (sync.json's count, the rows let go before it is written)
     names = hydrophones["receiver"].tolist()
     index = {name: k for k, name in enumerate(names)}
     tags = hydrophones.loc[hydrophones["sync_tag"] != "", ["sync_tag", "receiver"]]
@@ -411,7 +412,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         residuals["segment"] = np.where(rows >= 0, segments.segment_numbers(fit)[np.maximum(rows, 0)], 0)
     summary = _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, linked, start, bridged,
                        residuals, sync_tags, speed_source, sound_speed, bin_hours, origin, notes, detections,
-                       dim, clock.perf_counter() - started)
+                       rows_read, dim, clock.perf_counter() - started)
     if survey is not None:
         summary["survey_error"] = None if seen is None else seen.summary()
         if survey == "taken" and table_sigma is not None:

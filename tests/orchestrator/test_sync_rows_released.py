@@ -1,6 +1,6 @@
 """The synchronisation lets its caller's rows go when asked (:func:`sblsim.orchestrator.sync.run.synchronise`'s
 ``release_rows``: a season's rows not held through the fit): the rows emptied, their columns and dtypes kept, and the
-same clocks, residuals and sync tags as a synchronisation that keeps them."""
+same clocks, residuals, sync tags and count of rows read as a synchronisation that keeps them."""
 
 from __future__ import annotations
 
@@ -28,3 +28,5 @@ def test_the_rows_let_go_once_taken_and_the_same_synchronisation():
     assert released.frame.dtypes.to_dict() == frame.dtypes.to_dict()
     for name in ("offsets", "residuals", "sync_tags"):
         pd.testing.assert_frame_equal(getattr(got, name), getattr(expected, name))
+    assert got.summary["detections"] == expected.summary["detections"]  # the rows read counted before let go
+    assert got.summary["detections"]["rows"] == len(frame)
