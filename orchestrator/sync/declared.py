@@ -68,11 +68,10 @@ def sync_scale(receiver: np.ndarray, tag: np.ndarray, emission: np.ndarray, time
         return None
     xyz = table[["x", "y", "z"]].to_numpy(float)
     positions = xyz if np.isfinite(xyz[:, 2]).all() else xyz[:, :2]
-    row = at[receiver[use]]
-    present = np.unique(tag[use])  # the tags numbered in their names' order
+    row, mine = at[receiver[use]], tag[use]
+    present = np.unique(mine)  # the tags numbered in their names' order
     rank = np.zeros(len(tag_names), np.int64)
     rank[sorted(present, key=lambda k: tag_names[k])] = np.arange(len(present))
-    mine = tag[use]
     distance = np.linalg.norm(positions[home[mine]] - positions[row], axis=1)
     acoustic, predicted, pair = double_differences(row, rank[mine], np.asarray(emission, np.int64)[use],
                                                    np.asarray(time, float)[use], distance,
