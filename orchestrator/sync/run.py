@@ -272,7 +272,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
             notes.append("tags labelled Sync without a receiver row (position unknown), left out: "
                          + ", ".join(sorted(labelled)[:20]))
     pick = frame["tag"].isin(tag_index).to_numpy() & frame["receiver"].isin(index).to_numpy()
-    sync = frame.loc[pick, [c for c in frame.columns if c in SYNC_COLUMNS]]  # a season's other columns never copied
+    held = [c for c in frame.columns if c in SYNC_COLUMNS]
+    # a season's other columns never copied; rows that are all the sync tags' (a study's) not copied at all
+    sync = frame if pick.all() and held == list(frame.columns) else frame.loc[pick, held]
     if len(sync) < 2:
         raise ModelError("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
                          "detections in which receivers hear the sync tags named in the table's sync_tag column")

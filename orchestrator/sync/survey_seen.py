@@ -33,15 +33,31 @@ def pairs(residuals: pd.DataFrame, rejected: bool = False) -> pd.DataFrame:
 def _grouped(receiver: np.ndarray, receivers: pd.Index, tag: np.ndarray, tags: pd.Index, residual_m: np.ndarray,
              used: np.ndarray) -> pd.DataFrame:
     """:func:`pairs` of the arrivals ``used`` (n,), each of receiver ``receivers[receiver]`` and sync tag
-    ``tags[tag]`` (integer codes (n,)) with its residual [m]."""
+    ``tags[tag]`` (integer codes (n,)) with its residual [m]. A pair's median and median absolute deviation are
+    NumPy's (``numpy.median``) over its slice of the arrivals sorted once by pair, its residuals without a value
+    (NaN) left out of both and counted (as pandas' group median and size: the same figures to the bit, a season's
+    arrivals without its group-by's copies of every row)."""
     n = max(len(tags), 1)
-    key = receiver[used].astype(np.int64) * n + tag[used]
-    values = pd.Series(residual_m[used])
-    groups = values.groupby(key)
-    table = groups.agg(["median", "size"]).rename(columns={"size": "count"})
-    table["scale"] = 1.4826 * (values - groups.transform("median")).abs().groupby(key).median()
-    table.insert(0, "tag", tags.take(table.index.to_numpy() % n))
-    table.insert(0, "receiver", receivers.take(table.index.to_numpy() // n))
+    key = receiver[used].astype(np.int64, copy=False)  # (a copy: the selection's own)
+    key *= n
+    key += tag[used]
+    values = residual_m[used]
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    values = values[order]
+    del order
+    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, np.int64)
+    ends = np.r_[first[1:], len(key)].astype(np.int64)
+    median, scale = np.full(len(first), np.nan), np.full(len(first), np.nan)
+    for g, (start, end) in enumerate(zip(first, ends)):
+        mine = values[start:end]
+        mine = mine[~np.isnan(mine)]
+        if len(mine):
+            median[g] = np.median(mine)
+            scale[g] = 1.4826 * np.median(np.abs(mine - median[g]))
+    pair = key[first]
+    table = pd.DataFrame({"receiver": receivers.take(pair // n), "tag": tags.take(pair % n), "median": median,
+                          "count": (ends - first).astype(np.int64), "scale": scale})
     table = table[table["count"] >= MIN_PAIR_ARRIVALS]
     return table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
 

@@ -343,8 +343,7 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         median over the receivers of :func:`persistent_residual`), ``notes`` (a given synchronisation's
         ``sync_tags.csv`` refused: the tracks stand, its line said).
     """
-    refs, missing, terms = [], [], set()
-    paired = None if synced is None else pairs(synced.residuals)
+    refs, missing, terms, homes = [], [], set(), []
     for (name, spec), row in zip(asked, tags.to_dict("records")):
         if spec.role != "reference":
             continue
@@ -358,8 +357,12 @@ def score(asked: Sequence[tuple[str, TagSpec]], tags: pd.DataFrame, outcomes: di
         outcome = outcomes[row["folder"]]
         refs.append(score_reference(str(row["tag"]), outcome, truth))
         terms |= set((outcome.summary.get("motion") or {}).get("consider_terms") or [])
-        if paired is not None and truth["receiver"]:
-            refs[-1]["receiver_persistent_m"] = persistent_residual(paired, truth["receiver"])
+        homes.append(truth["receiver"])
+    # the residuals' pairs (a season's arrivals grouped) made where a reference tag is scored, not otherwise
+    paired = None if synced is None or not refs else pairs(synced.residuals)
+    for ref, home in zip(refs, homes) if paired is not None else ():
+        if home:
+            ref["receiver_persistent_m"] = persistent_residual(paired, home)
     notes = []
     try:
         table = synced.sync_tags if synced is not None else None if sync_dir is None else given_sync_tags(sync_dir)

@@ -201,7 +201,9 @@ class StudyDetections:
         tally = Tally.merged(parts)
         if not tally.used:  # said as of the whole file
             raise nothing_kept(self.data.source, tally.serials, deployments)
-        rows = reader_order(pd.concat(sync, ignore_index=True), self.data.format)
+        rows = pd.concat(sync, ignore_index=True)
+        sync.clear()  # the batches' rows let go before they are ordered (not three copies of a season's at once)
+        rows = reader_order(rows, self.data.format)
         return Assigned(replace(self.data, frame=rows), hydrophones, tally.set_aside, None, tally.span), tally
 
     def frames(self, keys: Sequence[str | None], tally: Tally, deployments: Deployments,

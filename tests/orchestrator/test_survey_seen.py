@@ -56,6 +56,31 @@ def test_the_pairs_are_each_receiver_and_tags_kept_arrivals_at_a_distance(reject
         assert table.loc[key, "scale"] == pytest.approx(scale)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_pairs_figures_are_pandas_group_medians_to_the_bit(seed):
+    """The pairs' medians, counts and scales as pandas' group-by on the texts makes them (group median and size,
+    the deviations from each row's group median): equal to the bit, with residuals missing (NaN, counted, not in the
+    figures), rounded ones (ties) and groups of even and odd sizes."""
+    rng = np.random.default_rng(seed)
+    n = 3000
+    residuals = pd.DataFrame({"receiver": rng.choice(NAMES, n), "tag": rng.choice(["S0", "S2", "S4"], n),
+                              "distance_m": rng.choice([0.0, 150.0, 300.0], n),
+                              "residual_m": rng.normal(size=n).round(int(rng.integers(1, 4))),
+                              "kept": rng.random(n) > 0.2})
+    residuals.loc[rng.random(n) < 0.05, "residual_m"] = np.nan
+    found = pairs(residuals)
+    rows = residuals[residuals["kept"] & (residuals["distance_m"] > 0)]
+    groups = rows.groupby(["receiver", "tag"])["residual_m"]
+    median = groups.transform("median")
+    expected = pd.DataFrame({"median": groups.median(), "count": groups.size(),
+                             "scale": 1.4826 * (rows["residual_m"] - median).abs().groupby(
+                                 [rows["receiver"], rows["tag"]]).median()})
+    expected = expected[expected["count"] >= MIN_PAIR_ARRIVALS].reset_index()
+    assert (found["count"] % 2 == 0).any() and (found["count"] % 2 == 1).any()
+    pd.testing.assert_frame_equal(found[["receiver", "tag", "median", "count", "scale"]], expected,
+                                  check_exact=True, check_dtype=False)
+
+
 def test_the_estimate_is_the_models_on_the_pairs():
     residuals, sync_tags, receivers = _residuals(1, sigma=2.0)
     found = seen_survey_error(residuals, sync_tags, receivers)
