@@ -69,7 +69,7 @@ from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tall
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
-from sblsim.orchestrator.tracks.depth import bottom_water_depth, check_water_depth
+from sblsim.orchestrator.tracks.depth import bottom_water_depth, study_water_depth
 from sblsim.orchestrator.tracks.many import run_tracks
 from sblsim.orchestrator.tracks.outputs import written_main
 from sblsim.orchestrator.tracks.resume import Resume
@@ -286,7 +286,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     deployments, assigned = array.deployments, array.assigned
     if array.line():
         notes.append(array.line())
-    bottom, water_info = _water(deployments, water_depth, notes)
+    bottom, water_info = study_water_depth(deployments.table, water_depth, notes)
     detected = tally.tags.index.to_numpy(dtype=object)
     sync_tags = set(assigned.hydrophones["sync_tag"]) - {""}
     if sheet is not None:
@@ -312,118 +312,120 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored, not refine_positions,
                                                                light and stored)
-        taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
-        survey, taken = (taken, None) if survey is None and isinstance(taken, dict) else (survey, taken)  # by receiver
-        scored = taken if survey is None else survey
-        _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
-        frame_crs = None if deployments.frame is None else deployments.frame.crs
-        rows: dict[str, dict[str, Any]] = {}
-        jobs, matrices, folders = [], {}, {}
-        logged = clocks_info["source"].startswith("as logged")
-        keys = [_key(name, detected) for name, _ in asked]
-        first: dict[str, int] = {}  # each tag's folder, by the first name asking for it
-        for i, key in enumerate(keys):
-            if isinstance(key, str):
-                first.setdefault(f"{TAGS_FOLDER}/{folder_name(key, 'tag')}", i)  # never one of the study's own names
-        built: dict[int, tuple] = {}  # each tag's folder, matrix, job and notes, in the order read
-        for i, stored_rows in source.frames([k if isinstance(k, str) else None for k in keys], tally, sheet_deployments,
-                                            assigned):
-            name, spec = asked[i]
-            key = keys[i]
-            row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
-                   "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
-                   **unpositioned(0)}
-            try:
-                if isinstance(key, ModelError):
-                    raise key
-                if key is None:
-                    raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
-                folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"
-                if first[folder] != i:
-                    raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
-                mine = _tag_detections(stored_rows, spec)
-                counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
-                row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
-                        "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
-                found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary",
-                                clocks_info["source"] == TOO_COARSE)
-                if found is not None:
-                    rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
-                        counted.pings, counted.at_once, found[0])
-                    continue
-                kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
-                        list(spec.burst_interval), "interval_s": spec.interval,
-                        "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
-                matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
-                                                  spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
-                if survey is not None:  # refined positions: each one's own error in the track's σ (sigma_m)
-                    matrix.survey_sigma = np.array([survey.get(n, max(survey.values())) for n in matrix.names])
-                said = [f"tag {key}: {matrix.summary['interval_warning']}"] if matrix.summary.get(
-                    "interval_warning") else []
-                heard = np.isfinite(matrix.toa).sum(axis=1)
-                row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
-                write_toa_files(matrix, workdir / folder, said)
-                options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
-                           "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
-                           "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
-                           "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
-                           "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
-                           "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
-                if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
-                    options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
-                                                                np.isfinite(matrix.toa).any(axis=0))
-                if light:  # written: its rows let go (a season's matrices are never in memory together), its empty
-                    # tables made anew (a slice of them, a view, would hold them whole)
-                    matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=emptied(matrix.pings))
-                built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt", workdir / folder / "receivers.csv",
-                                             options), said)
-                row["folder"] = folder
-            except ModelError as exc:
-                code = code_of(str(exc))
-                row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
-                                                                                 code)
-            rows[name] = row
-        stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already where synchronised here)
-        if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
-            assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
-        for i in sorted(built):  # in the order asked, whatever the order read
-            folder, matrix, job, said = built.pop(i)
-            notes.extend(said)
-            matrices[folder] = matrix
-            folders[asked[i][0]] = folder
-            jobs.append(job)
-            if bottom is not None:
-                water_info["per_tag_m"][keys[i]] = job[3]["water_depth"]
-        summary = _summary(data, deployments, tally, clocks_info, sheet, notes)
-        summary["toa_noise"] = noise_info
-        if water_info:
-            summary["water_depth"] = water_info
-        if started is not None:
-            started([j[0] for j in jobs], summary)
-        by_folder = {folder: name for name, folder in folders.items()}
-        specs = dict(asked)
-        tick = clock.perf_counter()
-        parts = TrackParts(workdir) if light and not keep_tracks else None
-        finish = {f: partial(written_main, out=workdir / f) for f, *_ in jobs  # a tag's files written as it ends
-                  if light and specs[by_folder[f]].role != "reference"}  # (in its worker, on this machine)
-
-        def done(folder: str, result):
-            name = by_folder[folder]
-            if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the study's
-                result = result.replace(str(workdir) + os.sep, "")
-            rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
-            if ended is not None:
-                ended(rows[name])
-            if parts is not None and not isinstance(result, str) and rows[name]["status"] == "tracked":
-                parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
-            if folder in finish and not isinstance(result, str):  # its files written as it ended: its track kept
-                return replace(result, estimates=None) if parts is None else replace(result, estimates=None, track=None)
-            return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
-
-        kept = 0 if resume is None else resume.kept
-        # the synchronisation's row per sync-tag arrival kept on disk while the tags are tracked (read back for the
-        # reference tags' scores and the study's sync/ folder)
+        # the synchronisation's row per sync-tag arrival kept on disk while the tags' matrices are made and the
+        # tags tracked (read back for the reference tags' scores and the study's sync/ folder)
         with spilled(synced, "residuals", workdir) if light and synced is not None else contextlib.nullcontext():
+            taken = taken_survey(stated, refine_positions, clocks_info)  # the survey's error in every σ
+            # by receiver
+            survey, taken = (taken, None) if survey is None and isinstance(taken, dict) else (survey, taken)
+            scored = taken if survey is None else survey
+            _, noise_info = toa_noise(toa_sigma, clocks.toa_sigma, clocks.receivers)
+            frame_crs = None if deployments.frame is None else deployments.frame.crs
+            rows: dict[str, dict[str, Any]] = {}
+            jobs, matrices, folders = [], {}, {}
+            logged = clocks_info["source"].startswith("as logged")
+            keys = [_key(name, detected) for name, _ in asked]
+            first: dict[str, int] = {}  # each tag's folder, by the first name asking for it
+            for i, key in enumerate(keys):
+                if isinstance(key, str):  # (never one of the study's own names)
+                    first.setdefault(f"{TAGS_FOLDER}/{folder_name(key, 'tag')}", i)
+            built: dict[int, tuple] = {}  # each tag's folder, matrix, job and notes, in the order read
+            for i, stored_rows in source.frames([k if isinstance(k, str) else None for k in keys], tally,
+                                                sheet_deployments, assigned):
+                name, spec = asked[i]
+                key = keys[i]
+                row = {"transmitter": name, "name": spec.name, "role": spec.role, "motion": spec.motion,
+                       "ping_type_stated": spec.described(), "status": "refused", "reason": "", "reason_code": "",
+                       **unpositioned(0)}
+                try:
+                    if isinstance(key, ModelError):
+                        raise key
+                    if key is None:
+                        raise ModelError(f"tag: {name!r} is never detected inside a deployment in {data.source!r}")
+                    folder = f"{TAGS_FOLDER}/{folder_name(key, 'tag')}"
+                    if first[folder] != i:
+                        raise ModelError(f"tag: {name!r} is tracked twice (as {key})")
+                    mine = _tag_detections(stored_rows, spec)
+                    counted = count(mine, table, clocks, logged)  # the true reason first: counted before any interval
+                    row |= {"tag": key, "detections": int(len(mine)), "receivers": len(counted.per_receiver),
+                            "time_resolution_s": counted.quantum} | unpositioned(counted.pings, counted.at_once)
+                    found = verdict(counted, mine["time"].to_numpy(float), spec.motion == "stationary",
+                                    clocks_info["source"] == TOO_COARSE)
+                    if found is not None:
+                        rows[name] = row | {"reason_code": found[0], "reason": found[1]} | unpositioned(
+                            counted.pings, counted.at_once, found[0])
+                        continue
+                    kind = {"type": spec.ping_type, "burst_interval_s": None if spec.burst_interval is None else
+                            list(spec.burst_interval), "interval_s": spec.interval,
+                            "burst_sequence": None if spec.burst_sequence is None else spec.burst_sequence.name}
+                    matrix = heard_columns(build_toa(replace(assigned.detections, frame=mine), table, clocks, key,
+                                                      spec.shortest_interval(), kind, force_interval, TRACK_OPTIONS))
+                    if survey is not None:  # refined positions: each one's own error in the track's σ (sigma_m)
+                        matrix.survey_sigma = np.array([survey.get(n, max(survey.values())) for n in matrix.names])
+                    said = [f"tag {key}: {matrix.summary['interval_warning']}"] if matrix.summary.get(
+                        "interval_warning") else []
+                    heard = np.isfinite(matrix.toa).sum(axis=1)
+                    row |= unpositioned(len(heard), int((heard >= counted.need).sum()))
+                    write_toa_files(matrix, workdir / folder, said)
+                    options = {"smooth": True, "sound_speed": sound_speed, "sound_speed_path": speed_path,
+                               "temperature": temperature, "salinity": salinity, "ping_type": spec.ping_type,
+                               "burst_interval": spec.burst_interval, "burst_sequence_path": spec.burst_sequence,
+                               "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
+                               "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
+                               "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
+                    if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
+                        options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
+                                                                    np.isfinite(matrix.toa).any(axis=0))
+                    if light:  # written: its rows let go (a season's matrices are never in memory together), its empty
+                        # tables made anew (a slice of them, a view, would hold them whole)
+                        matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=emptied(matrix.pings))
+                    built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt",
+                                                 workdir / folder / "receivers.csv", options), said)
+                    row["folder"] = folder
+                except ModelError as exc:
+                    code = code_of(str(exc))
+                    row |= {"reason": str(exc), "reason_code": code} | unpositioned(row["pings"], row["pings_at_once"],
+                                                                                     code)
+                rows[name] = row
+            stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already where synchronised here)
+            if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
+                assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
+            for i in sorted(built):  # in the order asked, whatever the order read
+                folder, matrix, job, said = built.pop(i)
+                notes.extend(said)
+                matrices[folder] = matrix
+                folders[asked[i][0]] = folder
+                jobs.append(job)
+                if bottom is not None:
+                    water_info["per_tag_m"][keys[i]] = job[3]["water_depth"]
+            summary = _summary(data, deployments, tally, clocks_info, sheet, notes)
+            summary["toa_noise"] = noise_info
+            if water_info:
+                summary["water_depth"] = water_info
+            if started is not None:
+                started([j[0] for j in jobs], summary)
+            by_folder = {folder: name for name, folder in folders.items()}
+            specs = dict(asked)
+            tick = clock.perf_counter()
+            parts = TrackParts(workdir) if light and not keep_tracks else None
+            finish = {f: partial(written_main, out=workdir / f) for f, *_ in jobs  # a tag's files written as it ends
+                      if light and specs[by_folder[f]].role != "reference"}  # (in its worker, on this machine)
+
+            def done(folder: str, result):
+                name = by_folder[folder]
+                if isinstance(result, str):  # a staging folder is no path the user gave: the tag's folder in the
+                    result = result.replace(str(workdir) + os.sep, "")  # study's
+                rows[name] |= tracked_row(result, clock.perf_counter() - tick, rows[name])
+                if ended is not None:
+                    ended(rows[name])
+                if parts is not None and not isinstance(result, str) and rows[name]["status"] == "tracked":
+                    parts.add(rows[name]["tag"], folder, result.track)  # tracks.csv's rows from its file, at the end
+                if folder in finish and not isinstance(result, str):  # its files written as it ended: its track kept
+                    return replace(result, estimates=None) if parts is None else replace(result, estimates=None,
+                                                                                         track=None)
+                return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
+
+            kept = 0 if resume is None else resume.kept
             results = run_tracks(jobs, workers, scheduler, done, resume, finish) if jobs else {}
         if resume is not None and (resume.kept > kept or resume.taken):
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
@@ -454,34 +456,6 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                 workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun
     return outcome
-
-
-def _water(deployments: Deployments, water_depth: float | None, notes: list[str]
-           ) -> tuple[pd.Series | None, dict[str, Any]]:
-    """The water depth the tags take: ``water_depth`` given (checked against the deployments' depths), else the
-    deployments' ``bottom_depth`` by receiver (each tag's taken from those that heard it) where the geometry is 3-D
-    (said in a note where it is not); returns that series (None where not used) and ``summary["water_depth"]``.
-
-    Raises
-    ------
-    ModelError
-        ``water_depth`` without the deployments' depths, or above a deployment's (one line).
-    """
-    table = deployments.table
-    three_d = bool(np.isfinite(table["z"].to_numpy(float)).all())
-    axes = ["x", "y", "z"] if three_d else ["x", "y"]
-    if water_depth is not None:
-        check_water_depth(water_depth, table[axes].to_numpy(float), table["receiver"].tolist())
-        return None, {"source": "given", "water_depth_m": water_depth}
-    bottom = table.set_index("receiver")["bottom_depth"]
-    if not np.isfinite(bottom.to_numpy(float)).any():
-        return None, {}
-    if not three_d:
-        notes.append("bottom_depth not used: the deployments' own depths are not all given (a 2-D geometry; give "
-                     "instrument_depth or z_m for every deployment)")
-        return None, {}
-    return bottom, {"source": "bottom_depth", "rule": "the deepest bottom_depth of the deployments that heard the tag",
-                    "per_tag_m": {}}
 
 
 def _summary(data: Detections, deployments: Deployments, tally: Tally, clocks: dict[str, Any],

@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.depth import (
@@ -51,6 +52,33 @@ def check_water_depth(water_depth: float | None, positions: np.ndarray, names: l
     if fixed is not None and not 0.0 <= fixed <= water_depth:
         raise ModelError(f"tag_depth: {fixed:g} m is outside the water column [0, {water_depth:g}] m (water_depth); "
                          "allowed: a depth between the surface and the bottom")
+
+
+def study_water_depth(table: pd.DataFrame, water_depth: float | None, notes: list[str]
+                      ) -> tuple[pd.Series | None, dict[str, Any]]:
+    """The water depth a study's tags take: ``water_depth`` given (checked against the deployments' depths), else
+    the deployments' ``bottom_depth`` by receiver (each tag's taken from those that heard it) where the geometry is 3-D
+    (said in a note where it is not); returns that series (None where not used) and ``summary["water_depth"]``.
+
+    Raises
+    ------
+    ModelError
+        ``water_depth`` without the deployments' depths, or above a deployment's (one line).
+    """
+    three_d = bool(np.isfinite(table["z"].to_numpy(float)).all())
+    axes = ["x", "y", "z"] if three_d else ["x", "y"]
+    if water_depth is not None:
+        check_water_depth(water_depth, table[axes].to_numpy(float), table["receiver"].tolist())
+        return None, {"source": "given", "water_depth_m": water_depth}
+    bottom = table.set_index("receiver")["bottom_depth"]
+    if not np.isfinite(bottom.to_numpy(float)).any():
+        return None, {}
+    if not three_d:
+        notes.append("bottom_depth not used: the deployments' own depths are not all given (a 2-D geometry; give "
+                     "instrument_depth or z_m for every deployment)")
+        return None, {}
+    return bottom, {"source": "bottom_depth", "rule": "the deepest bottom_depth of the deployments that heard the tag",
+                    "per_tag_m": {}}
 
 
 def tag_depth(readings: np.ndarray | None, m: int, dim: int, fixed: float | None,
@@ -185,4 +213,5 @@ def depth_term(prior: DepthPrior | None, covariances: np.ndarray) -> np.ndarray 
 
 
 __all__ = ["MAX_WATER_DEPTH", "PRIOR_SOURCE", "WATER_SOURCE", "bottom_water_depth", "check_water_depth", "depth_term",
-           "plane_depth", "prior_info", "prior_line", "tag_depth", "undetermined_depth", "water_line"]
+           "plane_depth", "prior_info", "prior_line", "study_water_depth", "tag_depth", "undetermined_depth",
+           "water_line"]
