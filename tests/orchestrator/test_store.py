@@ -332,3 +332,36 @@ def test_toa_of_a_store_reads_its_tag_alone_and_builds_its_files_matrix(tmp_path
     np.testing.assert_array_equal(from_store.toa, from_file.toa)
     with pytest.raises(ModelError, match=r"^tag: A69-9999-1 is never detected in the store .*; allowed: one of A69"):
         sblsim.toa(tmp_path / "s", receivers=files["deployments"], sync=tmp_path / "sync", tag="A69-9999-1")
+
+
+@pytest.mark.slow
+def test_a_store_study_holds_the_sync_residuals_on_disk_while_its_tags_are_built_and_tracked(tmp_path, monkeypatch):
+    """A study of a store (``sblsim track STORE --out``) keeps the synchronisation's row per sync-tag arrival on disk
+    from the synchronisation's end while each tag's matrix is made and the tags are tracked (a folder of its own in
+    the output, the table gone from memory), then has it back whole: the study's ``sync/residuals.csv`` is the same
+    as a study of the file it was stored from."""
+    import sblsim
+    from sblsim.orchestrator.telemetry import study as study_module
+
+    sim = simulate_study(n_receivers=5, n_tags=3, days=0.25, seed=3)
+    files = sim.write(tmp_path / "study", "vue")
+    ingest(files["detections"], tmp_path / "s")
+    seen = []
+    for name in ("build_toa", "run_tracks"):
+        real = getattr(study_module, name)
+
+        def spy(*args, _real=real, _name=name, **kwargs):
+            seen.append((_name, [p.name for p in tmp_path.rglob(".held-*")]))  # (in the run's own folder)
+            return _real(*args, **kwargs)
+
+        monkeypatch.setattr(study_module, name, spy)
+    sblsim.track(tmp_path / "s", receivers=files["deployments"], tags=files["tags"], sound_speed=1480.0,
+                 out=tmp_path / "out")
+    assert {name for name, _ in seen} == {"build_toa", "run_tracks"}
+    assert all(len(held) == 1 for _, held in seen)  # on disk at each
+    assert not list(tmp_path.rglob(".held-*"))  # and back after, its folder gone
+    monkeypatch.undo()
+    sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], sound_speed=1480.0,
+                 out=tmp_path / "file")
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "out" / "sync" / "residuals.csv"),
+                                  pd.read_csv(tmp_path / "file" / "sync" / "residuals.csv"))
