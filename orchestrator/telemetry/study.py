@@ -46,7 +46,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
-from sblsim.orchestrator.io.memory import emptied, spilled
+from sblsim.orchestrator.io.memory import emptied, release, spilled
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.deployments import Deployments
@@ -426,6 +426,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                 return None  # (a reference tag kept whole, for its scoring: its files written with the study's)
 
             kept = 0 if resume is None else resume.kept
+            release()  # what making the tags' matrices freed handed back before the tracking
             results = run_tracks(jobs, workers, scheduler, done, resume, finish) if jobs else {}
         if resume is not None and (resume.kept > kept or resume.taken):
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
