@@ -56,8 +56,9 @@ def check_water_depth(water_depth: float | None, positions: np.ndarray, names: l
 
 def study_water_depth(table: pd.DataFrame, water_depth: float | None, notes: list[str]
                       ) -> tuple[pd.Series | None, dict[str, Any]]:
-    """The water depth a study's tags take: ``water_depth`` given (checked against the deployments' depths), else
-    the deployments' ``bottom_depth`` by receiver (each tag's taken from those that heard it) where the geometry is 3-D
+    """The water depth a study's tags take (``table`` the deployments': ``receiver``, ``x``, ``y``, ``z`` [m],
+    ``bottom_depth`` [m]): ``water_depth`` [m] given (checked against the deployments' depths), else the
+    deployments' ``bottom_depth`` by receiver (each tag's taken from those that heard it) where the geometry is 3-D
     (said in a note where it is not); returns that series (None where not used) and ``summary["water_depth"]``.
 
     Raises
