@@ -5,10 +5,9 @@ depth σ: :mod:`sblsim.models.tracking.depth`), bounded by the water's depth whe
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.depth import (
@@ -20,6 +19,9 @@ from sblsim.models.tracking.depth import (
     plane_prior,
     plane_span,
 )
+
+if TYPE_CHECKING:  # (pandas not loaded with the tracker's modules: the command line's start stays light)
+    import pandas as pd
 
 #: ``summary.json``'s ``depth`` ``source`` where the depth is taken with a prior.
 PRIOR_SOURCE = "prior (the arrivals do not determine it)"
