@@ -46,18 +46,18 @@ def _grouped(receiver: np.ndarray, receivers: pd.Index, tag: np.ndarray, tags: p
     key = key[order]
     values = values[order]
     del order
-    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, np.int64)
-    ends = np.r_[first[1:], len(key)].astype(np.int64)
+    first = np.flatnonzero(np.diff(key, prepend=-1))  # each pair's first arrival (the keys are 0 or more)
+    count = np.diff(np.append(first, len(key)))
     median, scale = np.full(len(first), np.nan), np.full(len(first), np.nan)
-    for g, (start, end) in enumerate(zip(first, ends)):
-        mine = values[start:end]
+    for g, (start, size) in enumerate(zip(first, count)):
+        mine = values[start:start + size]
         mine = mine[~np.isnan(mine)]
         if len(mine):
             median[g] = np.median(mine)
             scale[g] = 1.4826 * np.median(np.abs(mine - median[g]))
     pair = key[first]
     table = pd.DataFrame({"receiver": receivers.take(pair // n), "tag": tags.take(pair % n), "median": median,
-                          "count": (ends - first).astype(np.int64), "scale": scale})
+                          "count": count.astype(np.int64), "scale": scale})
     table = table[table["count"] >= MIN_PAIR_ARRIVALS]
     return table.sort_values(["receiver", "tag"]).reset_index(drop=True)  # (as a groupby on the texts orders them)
 
