@@ -126,7 +126,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
-    from sblsim.models.tracking.filter_consider import consider_terms, filter_sensitivity, smoothed_sensitivity
+    from sblsim.models.tracking.filter_consider import consider_terms_along
     from sblsim.models.tracking.fix import speed_fix_covariance, survey_fix_covariance
     from sblsim.models.tracking.smoother_covariance import consider_covariance
     from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
@@ -302,15 +302,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)
-        # the filters' and the RTS smoother's consider terms of the same survey and speed errors
-        sensitivity = None if survey is None and not speed_sigma else filter_sensitivity(
-            record, positions, c, sigma, survey, speed_sigma)
-        terms = None if sensitivity is None else consider_terms(sensitivity, k)  # the EKF's, before it is smoothed
-        # the RTS smoother's (its filter's record alone), taken before the robust smoother's track: the sensitivity,
-        # (pings, states, receivers × dim + 1) numbers, is let go there, not held through that track's peak
-        smoothed = None if sensitivity is None or not smooth else consider_terms(
-            smoothed_sensitivity(record, sensitivity, True), k)
-        sensitivity = None  # (the EKF's and the RTS smoother's terms taken; smoothed in place where smoothed)
+        # the filters' and the RTS smoother's consider terms of the same survey and speed errors, a block of pings
+        # at a time (the sensitivity, (pings, states, receivers × dim + 1) numbers, is never made whole)
+        considered = survey is not None or bool(speed_sigma)
+        terms, smoothed = consider_terms_along(record, positions, c, sigma, k, survey, speed_sigma, smooth) \
+            if considered else (None, None)
         if smooth:
             xs, Ps = tracker.smooth(record)
             k0 = record.start
@@ -334,8 +330,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts],
-                 None if terms is None else consider_terms(filter_sensitivity(
-                     other, positions, c, sigma, survey, speed_sigma), u))
+                 consider_terms_along(other, positions, c, sigma, u, survey, speed_sigma)[0] if considered else None)
     f = np.flatnonzero(np.isfinite(fe))
     fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f],
                                                                         fused[f], survey)[:, :dim, :dim],

@@ -71,6 +71,70 @@ def test_the_jacobians_made_a_block_of_pings_at_a_time_give_the_same_sensitivity
     np.testing.assert_array_equal(whole, smoothed)
 
 
+def _jumping_record(seed: int, receivers: np.ndarray = R2, pings: int = 200, detection: float = 0.9):
+    """A record with a late start (the first pings unheard) and a restart (the tag's pings from another place of the
+    array half way: the filter lost, started again from a fix)."""
+    first, _, _ = tt.simulate_pings(receivers, pings, SETTINGS, np.random.default_rng(seed), speed=0.2,
+                                    detection=detection)
+    second, _, _ = tt.simulate_pings(receivers[::-1] * 0.6 + 30, pings, SETTINGS, np.random.default_rng(seed + 50),
+                                     speed=0.2, detection=detection)
+    toa = np.vstack([first, second - np.nanmin(second) + np.nanmax(first) + 2.0])
+    toa[:5] = np.nan
+    return tt.ToaTracker(receivers, SETTINGS).run(toa)
+
+
+@pytest.mark.parametrize("block", [7, 64, 2048])
+def test_the_terms_made_a_block_at_a_time_are_the_whole_sensitivitys_to_the_bit(monkeypatch, block):
+    """``consider_terms_along`` (the filter's sensitivity kept at each block's edge, each block made again for the
+    smoother) gives the filter's and the RTS smoother's terms of :func:`consider_terms` of the whole record's
+    :func:`filter_sensitivity` and :func:`smoothed_sensitivity` to the bit: every ping's (NaN before the start) and
+    the positioned ones', on records with a late start and a restart, one timing noise and one per receiver."""
+    monkeypatch.setattr(filter_consider, "BLOCK", block)
+    for seed, sigma in ((3, 1e-4), (4, np.linspace(1e-4, 2e-4, len(R2)))):
+        record = _jumping_record(seed)
+        assert record.start > 0 and record.restarts
+        S = filter_sensitivity(record, R2, 1480.0, sigma, np.ones(len(R2)), 1.0)
+        positioned = np.flatnonzero(record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0]))
+        for rows in (np.arange(len(S)), positioned):
+            filtered, smoothed = filter_consider.consider_terms_along(record, R2, 1480.0, sigma, rows,
+                                                                      np.ones(len(R2)), 1.0, smoothed=True)
+            np.testing.assert_array_equal(filtered, consider_terms(S, rows))
+            np.testing.assert_array_equal(smoothed, consider_terms(smoothed_sensitivity(record, S), rows))
+            alone, none = filter_consider.consider_terms_along(record, R2, 1480.0, sigma, rows, np.ones(len(R2)), 1.0)
+            assert none is None
+            np.testing.assert_array_equal(alone, filtered)
+
+
+def test_the_terms_made_a_block_at_a_time_hold_a_block_not_the_record(monkeypatch):
+    """The memory ``consider_terms_along`` takes beyond its two outputs (numpy's allocations traced) is a small part
+    of the whole record's sensitivity, which :func:`filter_sensitivity` and :func:`smoothed_sensitivity` take (20
+    receivers: 41 parameters a state; blocks of 8 pings in a record of 400)."""
+    import tracemalloc
+
+    angle = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    receivers = np.c_[100 + 120 * np.cos(angle), 75 + 120 * np.sin(angle)]
+    monkeypatch.setattr(filter_consider, "BLOCK", 8)
+    record = _jumping_record(5, receivers, pings=200)
+    rows = np.flatnonzero(record.used.any(axis=1))
+    m, s = record.x_filtered.shape
+    whole = m * s * (2 * len(receivers) + 1) * 8
+    outputs = 2 * len(rows) * s * s * 8
+
+    def peak(run):
+        tracemalloc.start()
+        try:
+            run()
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    ones = np.ones(len(receivers))
+    along = peak(lambda: filter_consider.consider_terms_along(record, receivers, 1480.0, 1e-4, rows, ones, 1.0, True))
+    made_whole = peak(lambda: consider_terms(smoothed_sensitivity(
+        record, filter_sensitivity(record, receivers, 1480.0, 1e-4, ones, 1.0), True), rows))
+    assert made_whole >= whole and along - outputs <= 0.5 * whole, (whole, outputs, along, made_whole)
+
+
 def _nees_means(error: str, filters: tuple[str, ...]) -> dict:
     """The 2-D NEES of each filter in ``filters`` and its RTS smoother over 20 seeds, with and without the consider
     term, the filter solved at a speed 1,480 + 10 N(0, 1) m/s (``error`` "speed"; the pings simulated at 1,480 m/s)

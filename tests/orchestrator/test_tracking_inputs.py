@@ -56,32 +56,26 @@ def test_the_depth_column_and_the_survey_errors_read_as_pandas_reads_them(tmp_pa
     assert np.allclose(read_receivers(toml).sigma, [0.2, np.nan], equal_nan=True)
 
 
-def test_the_filters_sensitivity_is_let_go_before_the_robust_smoothers_track(tmp_path, monkeypatch):
-    """A tag's sensitivity to the survey's errors ((pings, states, receivers × dim + 1) numbers: 132 MiB for a season's
-    tag) is let go once the EKF's and the RTS smoother's consider terms are taken from it: none is alive while the
-    robust smoother tracks (fails on the code that took the RTS smoother's terms after that track)."""
-    import weakref
-
+def test_a_tags_whole_sensitivity_is_never_made(tmp_path, monkeypatch):
+    """A tag's sensitivity to the survey's errors ((pings, states, receivers × dim + 1) numbers: 0.1 GiB for a
+    season's tag) is never made whole: the EKF's and the RTS smoother's consider terms come from it a block of pings at
+    a time (``consider_terms_along``, smoothed), and the whole record's :func:`filter_sensitivity` is not called
+    (fails on the code that made it whole and took the terms from it)."""
     from sblsim.models.tracking import filter_consider
 
-    made, alive = [], []
-    real_sensitivity, real_robust = filter_consider.filter_sensitivity, tt.robust_track
+    whole, along = [], []
+    real_along = filter_consider.consider_terms_along
 
-    def sensitivity(*args, **kwargs):
-        out = real_sensitivity(*args, **kwargs)
-        made.append(weakref.ref(out))
-        return out
+    def along_spy(*args, **kwargs):
+        along.append(args[7] if len(args) > 7 else kwargs.get("smoothed", False))
+        return real_along(*args, **kwargs)
 
-    def robust(*args, **kwargs):
-        alive.extend(ref() is not None for ref in made)
-        return real_robust(*args, **kwargs)
-
-    monkeypatch.setattr(filter_consider, "filter_sensitivity", sensitivity)
-    monkeypatch.setattr(tt, "robust_track", robust)
+    monkeypatch.setattr(filter_consider, "filter_sensitivity", lambda *a, **k: whole.append(1))
+    monkeypatch.setattr(filter_consider, "consider_terms_along", along_spy)
     toa_path, receivers_path, _, _ = _files(tmp_path)
     result = sblsim.replay_toa(toa_path, receivers=receivers_path, sound_speed=1480.0, survey_sigma=0.25)
     assert {"ekf", "rts", "robust"} <= set(result.estimates["estimator"])
-    assert alive and not any(alive)
+    assert not whole and True in along
 
 
 @pytest.mark.slow
