@@ -43,6 +43,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sblsim.models.declarations import ModelError
+from sblsim.orchestrator.io.memory import arrow_pool
 from sblsim.orchestrator.io.output import staged_directory
 from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.io.tables import regular_file
@@ -251,6 +252,7 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
         size limits (naming the file's line and column), a disk without the file's size free, a disk that fills.
     """
     started = clock.perf_counter()
+    arrow_pool()
     path, out = Path(path), Path(out)
     if format is not None and format not in FORMATS:
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")

@@ -17,7 +17,7 @@ from sblsim.models.sync.pings import largest_travel_time
 from sblsim.models.sync.resolution import resolution_warning
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.models.sync.windows import WINDOW_DAYS
-from sblsim.orchestrator.io.memory import emptied
+from sblsim.orchestrator.io.memory import arrow_pool, emptied
 from sblsim.orchestrator.readers.assign import assign
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
@@ -95,6 +95,7 @@ def synchronise_files(detections: Path, receivers: Path, format: str | None, sou
     """
     # a file read (or refused) first, before the deployments load their geodesy; of a store, the deployments' sync
     # tags' rows alone: a season's other detections are never read
+    arrow_pool()
     store = is_store(detections)
     data = None if store else read_any(detections, format)
     deployments = read_deployments(receivers, crs, frame)

@@ -46,7 +46,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
-from sblsim.orchestrator.io.memory import emptied, release, spilled
+from sblsim.orchestrator.io.memory import arrow_pool, emptied, release, spilled
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers.deployments import Deployments
@@ -271,6 +271,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         (one line). A tag that cannot be tracked is a row of ``tags.csv``.
     """
     begun = clock.perf_counter()
+    arrow_pool()
     files = study_files(detections, receivers, spatial, tags)
     stored = len(files.detections) == 1 and is_store(files.detections[0])  # read a batch of tags at a time
     deployments, data, sheet, notes = read_study(files, format, crs, frame, tz, detections=not stored)

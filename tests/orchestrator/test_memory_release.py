@@ -130,3 +130,39 @@ def test_spilled_table_stays_in_memory_where_no_folder_can_be_made(tmp_path):
     with memory.spilled(holder, "residuals", parent):
         assert holder.residuals is original
     assert holder.residuals is original and [p.name for p in tmp_path.iterdir()] == ["a-file"]
+
+
+_POOL_CHILD = """
+import json, os, sys
+if sys.argv[1]:
+    os.environ["ARROW_DEFAULT_MEMORY_POOL"] = sys.argv[1]
+else:
+    os.environ.pop("ARROW_DEFAULT_MEMORY_POOL", None)
+import pyarrow as pa
+from sblsim.orchestrator.io.memory import arrow_pool
+first = arrow_pool()
+print(json.dumps({"first": first, "again": arrow_pool(), "made": pa.array([1.5, 2.5]).buffers()[1] is not None,
+                  "backend": pa.default_memory_pool().backend_name,
+                  "variable": os.environ.get("ARROW_DEFAULT_MEMORY_POOL"),
+                  "supported": pa.supported_memory_backends()}))
+"""
+
+
+@pytest.mark.parametrize("variable", ["", "system"])
+def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable):
+    """In a fresh process: with no ``ARROW_DEFAULT_MEMORY_POOL``, Arrow's default pool becomes jemalloc's where this
+    pyarrow has it and the variable says so to the worker processes (else Arrow's own default is kept, unnamed);
+    a pool the user named is kept, the variable untouched."""
+    import json
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", _POOL_CHILD, variable], capture_output=True, text=True, check=True)
+    got = json.loads(run.stdout)
+    assert got["first"] == got["again"] == got["backend"] and got["made"]
+    if variable:
+        assert got["backend"] == variable and got["variable"] == variable
+    elif "jemalloc" in got["supported"]:
+        assert got["backend"] == "jemalloc" and got["variable"] == "jemalloc"
+    else:
+        assert got["backend"] != "jemalloc" and got["variable"] is None
