@@ -31,10 +31,14 @@ from pathlib import Path
 
 from bench_memory import peak_bytes
 
-import sblsim
-from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.readers.detections import read_detections
-from sblsim.orchestrator.telemetry.simulate import simulate_study
+from sblsim.orchestrator.io.memory import arrow_pool
+
+arrow_pool()  # Arrow's pool as the command line takes it, before pyarrow loads (here and in the worker processes)
+
+import sblsim  # noqa: E402
+from sblsim.models.declarations import ModelError  # noqa: E402
+from sblsim.orchestrator.readers.detections import read_detections  # noqa: E402
+from sblsim.orchestrator.telemetry.simulate import simulate_study  # noqa: E402
 
 #: The issue's targets: detections read into the store per second [1/s], the peak of the reading [GiB].
 TARGET_RATE = 1e6

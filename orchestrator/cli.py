@@ -13,6 +13,7 @@ import argparse
 import os
 import sys
 
+from sblsim.orchestrator.io.memory import arrow_pool
 from sblsim.orchestrator.io.stop import (
     SIGNAL_STATUS_BASE,
     ending,
@@ -26,6 +27,8 @@ from sblsim.orchestrator.io.stop import (
 # a worker process a command spawns imports this module first: it ignores Ctrl-C (its command stops it) before the
 # seconds of imports below, in which a Ctrl-C at the terminal would end it with a traceback of its own
 workers_ignore_ctrl_c()
+# Arrow's memory pool chosen before any command loads pyarrow (its C++ library takes its default once, when loaded)
+arrow_pool()
 
 from sblsim.models.errors import SblsimError  # noqa: E402
 from sblsim.orchestrator.commands import COMMANDS  # noqa: E402

@@ -23,7 +23,9 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import functools
+import importlib.util
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -63,31 +65,46 @@ POOL_VARIABLE = "ARROW_DEFAULT_MEMORY_POOL"
 
 
 @functools.cache
-def arrow_pool() -> str:
-    """Arrow's default memory pool made jemalloc's, in this process and in the worker processes it starts (the
-    environment's ``ARROW_DEFAULT_MEMORY_POOL``), where this pyarrow has jemalloc (not every build has: Windows'
-    wheels have none) and the variable names no pool. mimalloc's, Arrow's default on Linux, kept what it had freed
-    resident (a season's study of 91 days: 123 MiB of its region when the tags' tracking began, 26 MiB of it
-    allocated); on jemalloc's the study's process held 0.05 to 0.16 GiB less at each stage, in the same time
-    (`docs/benchmarks.md`, "Arrow's pool"). Buffers made before keep their own pool. Called by
-    :func:`sblsim.track`, :func:`sblsim.sync` and :func:`sblsim.store` (a setting of the process, said in their
-    docs), once a process.
+def arrow_pool() -> str | None:
+    """Arrow's default memory pool made jemalloc's, where the installed pyarrow has jemalloc (not every build has:
+    Windows' wheels have none; its build's ``arrow/util/config.h`` says) and ``ARROW_DEFAULT_MEMORY_POOL`` names no
+    pool: the variable set, for this process where pyarrow is not imported yet (Arrow's C++ library takes its default
+    pool once, when it is loaded) and for every worker process it starts; where pyarrow is imported already, its
+    Python functions' pool (``pyarrow.set_memory_pool``) too. mimalloc's, Arrow's default on Linux, kept what it had
+    freed resident (a season's study of 91 days: 123 MiB of its region when the tags' tracking began, 26 MiB of it
+    allocated); on jemalloc's the study held less at each stage, in the same time (`docs/benchmarks.md`, "Arrow's
+    pool"). Buffers made before keep their own pool. Called as ``sblsim``'s command line starts, and by
+    :func:`sblsim.track`, :func:`sblsim.sync` and :func:`sblsim.store`; once a process.
 
     Returns
     -------
-    str
-        The default pool's backend name after the call (``jemalloc``, or what Arrow had).
+    str or None
+        The pool ``ARROW_DEFAULT_MEMORY_POOL`` names after the call; None where it names none (no jemalloc).
     """
-    import pyarrow as pa
+    named = os.environ.get(POOL_VARIABLE)
+    if named:
+        return named
+    if not _has_jemalloc():
+        return None
+    os.environ[POOL_VARIABLE] = "jemalloc"
+    if "pyarrow" in sys.modules:
+        import pyarrow as pa
 
-    if not os.environ.get(POOL_VARIABLE):
-        try:
-            pool = pa.jemalloc_memory_pool()
-        except NotImplementedError:  # (a pyarrow built without jemalloc: its default kept)
-            return pa.default_memory_pool().backend_name
-        pa.set_memory_pool(pool)
-        os.environ[POOL_VARIABLE] = "jemalloc"
-    return pa.default_memory_pool().backend_name
+        pa.set_memory_pool(pa.jemalloc_memory_pool())
+    return "jemalloc"
+
+
+def _has_jemalloc() -> bool:
+    """Whether the installed pyarrow's Arrow was built with jemalloc (``#define ARROW_JEMALLOC`` in its
+    ``arrow/util/config.h``), found without importing it; False where it cannot tell."""
+    try:
+        spec = importlib.util.find_spec("pyarrow")
+        folder = Path(spec.origin).parent if spec is not None and spec.origin else None
+        config = None if folder is None else folder / "include" / "arrow" / "util" / "config.h"
+        return config is not None and config.is_file() and \
+            re.search(r"^#define ARROW_JEMALLOC\b", config.read_text(errors="replace"), re.M) is not None
+    except (OSError, ImportError, ValueError):
+        return False
 
 
 def emptied(frame: Any) -> Any:

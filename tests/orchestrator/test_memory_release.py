@@ -138,31 +138,38 @@ if sys.argv[1]:
     os.environ["ARROW_DEFAULT_MEMORY_POOL"] = sys.argv[1]
 else:
     os.environ.pop("ARROW_DEFAULT_MEMORY_POOL", None)
-import pyarrow as pa
+if sys.argv[2] == "before":
+    import pyarrow
 from sblsim.orchestrator.io.memory import arrow_pool
+loaded = "pyarrow" in sys.modules
 first = arrow_pool()
-print(json.dumps({"first": first, "again": arrow_pool(), "made": pa.array([1.5, 2.5]).buffers()[1] is not None,
+import pyarrow as pa
+print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(),
                   "backend": pa.default_memory_pool().backend_name,
+                  "made": pa.array([1.5, 2.5]).buffers()[1] is not None,
                   "variable": os.environ.get("ARROW_DEFAULT_MEMORY_POOL"),
                   "supported": pa.supported_memory_backends()}))
 """
 
 
-@pytest.mark.parametrize("variable", ["", "system"])
-def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable):
+@pytest.mark.parametrize("variable, imported", [("", "after"), ("", "before"), ("system", "after")])
+def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported):
     """In a fresh process: with no ``ARROW_DEFAULT_MEMORY_POOL``, Arrow's default pool becomes jemalloc's where this
-    pyarrow has it and the variable says so to the worker processes (else Arrow's own default is kept, unnamed);
-    a pool the user named is kept, the variable untouched."""
+    pyarrow has it, pyarrow imported after the call or before it, and the variable says so to the worker processes
+    (else Arrow's own default is kept, the variable unset); a pool the user named is kept, the variable untouched.
+    The memory module itself does not load pyarrow."""
     import json
     import subprocess
     import sys
 
-    run = subprocess.run([sys.executable, "-c", _POOL_CHILD, variable], capture_output=True, text=True, check=True)
+    run = subprocess.run([sys.executable, "-c", _POOL_CHILD, variable, imported], capture_output=True, text=True,
+                         check=True)
     got = json.loads(run.stdout)
-    assert got["first"] == got["again"] == got["backend"] and got["made"]
+    assert got["loaded"] == (imported == "before") and got["first"] == got["again"] and got["made"]
+    assert "Unsupported backend" not in run.stderr
     if variable:
-        assert got["backend"] == variable and got["variable"] == variable
+        assert got["backend"] == got["first"] == got["variable"] == variable
     elif "jemalloc" in got["supported"]:
-        assert got["backend"] == "jemalloc" and got["variable"] == "jemalloc"
+        assert got["backend"] == got["first"] == got["variable"] == "jemalloc"
     else:
-        assert got["backend"] != "jemalloc" and got["variable"] is None
+        assert got["backend"] != "jemalloc" and got["first"] is None and got["variable"] is None
