@@ -9,8 +9,8 @@ ones of that size come from its heap, and freed heap pages stay resident: over a
 process grew as each tag's result came back, was written and let go (`docs/benchmarks.md`, "What a season's study
 keeps").
 
-Arrow's pool is made jemalloc's for a study, a synchronisation and a store (:func:`arrow_pool`): mimalloc's, Arrow's
-default on Linux, kept memory it had freed resident through a season's study where jemalloc's hands it back
+Arrow's pool is made jemalloc's, its freed pages handed back at once, as the command line starts (:func:`arrow_pool`):
+mimalloc's, Arrow's default on Linux, kept memory it had freed resident through a season's study
 (`docs/benchmarks.md`, "Arrow's pool").
 
 What a stage does not need need not be held through it: a table whose rows are let go for good is made anew empty
@@ -49,46 +49,38 @@ def _trim():
 
 def release() -> None:
     """Arrow's default memory pool's freed memory returned to the system (``pyarrow.MemoryPool.release_unused``:
-    on mimalloc, the calling thread's freed pages; on jemalloc, every arena's, and from the first call on each page
-    as it is freed: :func:`_without_decay`; the buffers in use are untouched), and on glibc its heaps' free pages too
-    (``malloc_trim(0)``). Costs milliseconds: called between a computation's stages, not in its loops."""
+    on mimalloc, the calling thread's freed pages; on jemalloc, every arena's; the buffers in use are untouched),
+    and on glibc its heaps' free pages too (``malloc_trim(0)``). Costs milliseconds: called between a computation's
+    stages, not in its loops."""
     import pyarrow as pa  # (imported here: the modules that call this one import no Arrow at their own import)
 
-    pool = pa.default_memory_pool()
-    if pool.backend_name == "jemalloc":
-        _without_decay()
-    pool.release_unused()
+    pa.default_memory_pool().release_unused()
     trim = _trim()
     if trim is not None:
         trim(0)
 
 
-@functools.cache
-def _without_decay() -> None:
-    """jemalloc's freed pages handed back to the system as they are freed (``pyarrow.jemalloc_set_decay_ms(0)``;
-    Arrow's own setting keeps them a second): a season's residuals read back from Parquet kept 0.18 GiB resident
-    beyond the table's 0.14 GiB after :func:`release`, 0.02 GiB with it, in the same time (`docs/benchmarks.md`,
-    "Arrow's pool")."""
-    import pyarrow as pa
-
-    pa.jemalloc_set_decay_ms(0)
-
-
 #: The environment variable by which Arrow takes its default memory pool (``jemalloc``, ``mimalloc``, ``system``):
 #: where a user set it, :func:`arrow_pool` leaves Arrow's choice as it is.
 POOL_VARIABLE = "ARROW_DEFAULT_MEMORY_POOL"
+#: The environment variable by which Arrow's own jemalloc (its symbols prefixed ``je_arrow_``) takes its settings as it
+#: starts (jemalloc's ``MALLOC_CONF``, jemalloc(3)); :func:`arrow_pool` sets its pages' decay to none where a user did
+#: not set it: freed pages handed back to the system at once (Arrow's own setting keeps them a second, and a page freed
+#: in an arena made before ``pyarrow.jemalloc_set_decay_ms`` is called keeps that setting).
+DECAY_VARIABLE = "JE_ARROW_MALLOC_CONF"
 
 
 @functools.cache
 def arrow_pool() -> str | None:
     """Arrow's default memory pool made jemalloc's, where the installed pyarrow has jemalloc (not every build has:
     Windows' wheels have none; its build's ``arrow/util/config.h`` says) and ``ARROW_DEFAULT_MEMORY_POOL`` names no
-    pool: the variable set, for this process where pyarrow is not imported yet (Arrow's C++ library takes its default
-    pool once, when it is loaded) and for every worker process it starts; where pyarrow is imported already, its
-    Python functions' pool (``pyarrow.set_memory_pool``) too. mimalloc's, Arrow's default on Linux, kept what it had
-    freed resident (a season's study of 91 days: 123 MiB of its region when the tags' tracking began, 26 MiB of it
-    allocated); on jemalloc's the study held less at each stage, in the same time (`docs/benchmarks.md`, "Arrow's
-    pool"). Buffers made before keep their own pool. Called as ``sblsim``'s command line starts, and by
+    pool: the variable set, with jemalloc's freed pages handed back at once (:data:`DECAY_VARIABLE`), for this
+    process where pyarrow is not imported yet (Arrow's C++ library takes its default pool once, when it is loaded)
+    and for every worker process it starts; where pyarrow is imported already, its Python functions' pool
+    (``pyarrow.set_memory_pool``) too. mimalloc's, Arrow's default on Linux, kept what it had freed resident (a
+    season's study of 91 days: 123 MiB of its region when the tags' tracking began, 26 MiB of it allocated); on
+    jemalloc's a season's study peaked a fifth lower at 28 and at 91 days, in the same time (`docs/benchmarks.md`,
+    "Arrow's pool"). Buffers made before keep their own pool. Called as ``sblsim``'s command line starts, and by
     :func:`sblsim.track`, :func:`sblsim.sync` and :func:`sblsim.store`; once a process.
 
     Returns
@@ -102,6 +94,7 @@ def arrow_pool() -> str | None:
     if not _has_jemalloc():
         return None
     os.environ[POOL_VARIABLE] = "jemalloc"
+    os.environ.setdefault(DECAY_VARIABLE, "dirty_decay_ms:0,muzzy_decay_ms:0")
     if "pyarrow" in sys.modules:
         import pyarrow as pa
 
@@ -174,4 +167,4 @@ def spilled(holder: Any, name: str, folder: Path) -> Iterator[None]:
         release()
 
 
-__all__ = ["POOL_VARIABLE", "arrow_pool", "emptied", "release", "spilled"]
+__all__ = ["DECAY_VARIABLE", "POOL_VARIABLE", "arrow_pool", "emptied", "release", "spilled"]

@@ -138,6 +138,7 @@ if sys.argv[1]:
     os.environ["ARROW_DEFAULT_MEMORY_POOL"] = sys.argv[1]
 else:
     os.environ.pop("ARROW_DEFAULT_MEMORY_POOL", None)
+os.environ.pop("JE_ARROW_MALLOC_CONF", None)
 if sys.argv[2] == "before":
     import pyarrow
 from sblsim.orchestrator.io.memory import arrow_pool
@@ -148,6 +149,7 @@ print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(),
                   "backend": pa.default_memory_pool().backend_name,
                   "made": pa.array([1.5, 2.5]).buffers()[1] is not None,
                   "variable": os.environ.get("ARROW_DEFAULT_MEMORY_POOL"),
+                  "decay": os.environ.get("JE_ARROW_MALLOC_CONF"),
                   "supported": pa.supported_memory_backends()}))
 """
 
@@ -155,9 +157,9 @@ print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(),
 @pytest.mark.parametrize("variable, imported", [("", "after"), ("", "before"), ("system", "after")])
 def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported):
     """In a fresh process: with no ``ARROW_DEFAULT_MEMORY_POOL``, Arrow's default pool becomes jemalloc's where this
-    pyarrow has it, pyarrow imported after the call or before it, and the variable says so to the worker processes
-    (else Arrow's own default is kept, the variable unset); a pool the user named is kept, the variable untouched.
-    The memory module itself does not load pyarrow."""
+    pyarrow has it, pyarrow imported after the call or before it, and the variable says so to the worker processes,
+    jemalloc's pages' decay none (else Arrow's own default is kept, the variables unset); a pool the user named is
+    kept, the variables untouched. The memory module itself does not load pyarrow."""
     import json
     import subprocess
     import sys
@@ -168,8 +170,9 @@ def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported):
     assert got["loaded"] == (imported == "before") and got["first"] == got["again"] and got["made"]
     assert "Unsupported backend" not in run.stderr
     if variable:
-        assert got["backend"] == got["first"] == got["variable"] == variable
+        assert got["backend"] == got["first"] == got["variable"] == variable and got["decay"] is None
     elif "jemalloc" in got["supported"]:
         assert got["backend"] == got["first"] == got["variable"] == "jemalloc"
+        assert got["decay"] == "dirty_decay_ms:0,muzzy_decay_ms:0"
     else:
-        assert got["backend"] != "jemalloc" and got["first"] is None and got["variable"] is None
+        assert got["backend"] != "jemalloc" and got["first"] is None and got["variable"] is got["decay"] is None
