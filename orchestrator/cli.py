@@ -27,8 +27,6 @@ from sblsim.orchestrator.io.stop import (
 # a worker process a command spawns imports this module first: it ignores Ctrl-C (its command stops it) before the
 # seconds of imports below, in which a Ctrl-C at the terminal would end it with a traceback of its own
 workers_ignore_ctrl_c()
-# Arrow's memory pool chosen before any command loads pyarrow (its C++ library takes its default once, when loaded)
-arrow_pool()
 
 from sblsim.models.errors import SblsimError  # noqa: E402
 from sblsim.orchestrator.commands import COMMANDS  # noqa: E402
@@ -98,6 +96,9 @@ class _PipeSafeStream:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sblsim`` console script."""
     args = _parser().parse_args(argv)
+    # Arrow's memory pool chosen before the command loads pyarrow (its C++ library takes its default once, when
+    # loaded); a store's reading, whose memory is its piece's, keeps jemalloc's decay (faster)
+    arrow_pool(decay=args.command != "store")
     stdout = sys.stdout
     sys.stdout = _PipeSafeStream(stdout)
     try:

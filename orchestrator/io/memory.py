@@ -71,17 +71,19 @@ DECAY_VARIABLE = "JE_ARROW_MALLOC_CONF"
 
 
 @functools.cache
-def arrow_pool() -> str | None:
+def arrow_pool(decay: bool = True) -> str | None:
     """Arrow's default memory pool made jemalloc's, where the installed pyarrow has jemalloc (not every build has:
     Windows' wheels have none; its build's ``arrow/util/config.h`` says) and ``ARROW_DEFAULT_MEMORY_POOL`` names no
-    pool: the variable set, with jemalloc's freed pages handed back at once (:data:`DECAY_VARIABLE`), for this
+    pool: the variable set, with jemalloc's freed pages handed back at once unless ``decay`` is False
+    (:data:`DECAY_VARIABLE`: a store's reading, whose memory is its piece's, was 12 % slower with it), for this
     process where pyarrow is not imported yet (Arrow's C++ library takes its default pool once, when it is loaded)
     and for every worker process it starts; where pyarrow is imported already, its Python functions' pool
     (``pyarrow.set_memory_pool``) too. mimalloc's, Arrow's default on Linux, kept what it had freed resident (a
     season's study of 91 days: 123 MiB of its region when the tags' tracking began, 26 MiB of it allocated); on
     jemalloc's a season's study peaked a fifth lower at 28 and at 91 days, in the same time (`docs/benchmarks.md`,
-    "Arrow's pool"). Buffers made before keep their own pool. Called as ``sblsim``'s command line starts, and by
-    :func:`sblsim.track`, :func:`sblsim.sync` and :func:`sblsim.store`; once a process.
+    "Arrow's pool"). Buffers made before keep their own pool. Called as ``sblsim``'s command line starts (``sblsim
+    store``'s without ``decay``), and by :func:`sblsim.track`, :func:`sblsim.sync` and :func:`sblsim.store`; the
+    first call of a process sets the variables.
 
     Returns
     -------
@@ -94,7 +96,8 @@ def arrow_pool() -> str | None:
     if not _has_jemalloc():
         return None
     os.environ[POOL_VARIABLE] = "jemalloc"
-    os.environ.setdefault(DECAY_VARIABLE, "dirty_decay_ms:0,muzzy_decay_ms:0")
+    if decay:
+        os.environ.setdefault(DECAY_VARIABLE, "dirty_decay_ms:0,muzzy_decay_ms:0")
     if "pyarrow" in sys.modules:
         import pyarrow as pa
 

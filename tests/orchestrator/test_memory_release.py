@@ -143,9 +143,9 @@ if sys.argv[2] == "before":
     import pyarrow
 from sblsim.orchestrator.io.memory import arrow_pool
 loaded = "pyarrow" in sys.modules
-first = arrow_pool()
+first = arrow_pool(decay=sys.argv[3] == "decay")
 import pyarrow as pa
-print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(),
+print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(decay=sys.argv[3] == "decay"),
                   "backend": pa.default_memory_pool().backend_name,
                   "made": pa.array([1.5, 2.5]).buffers()[1] is not None,
                   "variable": os.environ.get("ARROW_DEFAULT_MEMORY_POOL"),
@@ -154,18 +154,20 @@ print(json.dumps({"loaded": loaded, "first": first, "again": arrow_pool(),
 """
 
 
-@pytest.mark.parametrize("variable, imported", [("", "after"), ("", "before"), ("system", "after")])
-def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported):
+@pytest.mark.parametrize("variable, imported, decay", [("", "after", "decay"), ("", "before", "decay"),
+                                                       ("", "after", "kept"), ("system", "after", "decay")])
+def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported, decay):
     """In a fresh process: with no ``ARROW_DEFAULT_MEMORY_POOL``, Arrow's default pool becomes jemalloc's where this
     pyarrow has it, pyarrow imported after the call or before it, and the variable says so to the worker processes,
-    jemalloc's pages' decay none (else Arrow's own default is kept, the variables unset); a pool the user named is
-    kept, the variables untouched. The memory module itself does not load pyarrow."""
+    jemalloc's pages' decay none unless asked to keep it (a store's); else Arrow's own default is kept, the
+    variables unset; a pool the user named is kept, the variables untouched. The memory module itself does not
+    load pyarrow."""
     import json
     import subprocess
     import sys
 
-    run = subprocess.run([sys.executable, "-c", _POOL_CHILD, variable, imported], capture_output=True, text=True,
-                         check=True)
+    run = subprocess.run([sys.executable, "-c", _POOL_CHILD, variable, imported, decay], capture_output=True,
+                         text=True, check=True)
     got = json.loads(run.stdout)
     assert got["loaded"] == (imported == "before") and got["first"] == got["again"] and got["made"]
     assert "Unsupported backend" not in run.stderr
@@ -173,6 +175,6 @@ def test_arrow_pool_is_jemallocs_unless_the_user_named_one(variable, imported):
         assert got["backend"] == got["first"] == got["variable"] == variable and got["decay"] is None
     elif "jemalloc" in got["supported"]:
         assert got["backend"] == got["first"] == got["variable"] == "jemalloc"
-        assert got["decay"] == "dirty_decay_ms:0,muzzy_decay_ms:0"
+        assert got["decay"] == ("dirty_decay_ms:0,muzzy_decay_ms:0" if decay == "decay" else None)
     else:
         assert got["backend"] != "jemalloc" and got["first"] is None and got["variable"] is got["decay"] is None
