@@ -200,7 +200,7 @@ def consider_terms_along(record: TrackRecord, receivers: np.ndarray, c: float, s
     if not smoothed:
         return filtered, None
     k0, after = record.start, None  # after: the smoother's S at the next block's first ping
-    for a in range(((m - 1) // BLOCK) * BLOCK if m else 0, -1, -BLOCK):
+    for a in range(((m - 1) // BLOCK) * BLOCK, -1, -BLOCK) if m else ():
         b = min(a + BLOCK, m)
         sens = np.full((b - a, size, p), np.nan)
         for k, Sk in _recursion(*args, a, b, edges[a]):
