@@ -9,7 +9,8 @@ numpy or scipy solve as whatever it raises next. The stop stays pending all the 
 its natural step (:func:`check`, called by :meth:`sblsim.orchestrator.io.progress.Progress.update` each time a
 unit of work is done), and an exception that comes out of the work while a stop is pending is the stop, not an
 error (:func:`is_stop`). The command then ends with one line and :func:`exit_status`: 128 + the signal (130 for
-SIGINT, 143 for SIGTERM, 129 for SIGHUP).
+SIGINT, 143 for SIGTERM, 129 for SIGHUP). A signal handled inside a finaliser (a ``__del__`` the garbage collector
+runs), where Python cannot raise the exception and prints it instead, is said nothing of: it stays pending.
 
 A signal a parent process set to be ignored (``nohup``'s SIGHUP, a background job's SIGINT) stays ignored. The
 Python API installs no handler: its callers' own handling of signals is theirs. A worker process a command starts
@@ -163,12 +164,27 @@ def stop_on() -> Iterator[None]:
             number = getattr(signal, name, None)
             if number is not None and signal.getsignal(number) is not signal.SIG_IGN:
                 previous[number] = signal.signal(number, _handler)
+    hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_stop(hook)
     try:
         yield
     finally:
+        sys.unraisablehook = hook
         for number, handler in previous.items():
             signal.signal(number, signal.SIG_DFL if handler is None else handler)
         _RECEIVED.clear()
+
+
+def _quiet_stop(previous):
+    """``sys.unraisablehook`` that says nothing of the stop's own exception where Python could not raise it (the
+    handler ran inside a finaliser, a ``__del__`` the garbage collector called: CPython prints ``Exception ignored
+    in: ...`` and its traceback, then goes on): the stop stays pending and ends the command at its next check.
+    Every other unraisable exception goes to ``previous``."""
+    def hook(unraisable) -> None:
+        if _RECEIVED and unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+            return
+        previous(unraisable)
+    return hook
 
 
 __all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "THREADS_GRACE", "check", "deferred", "ending",

@@ -270,6 +270,51 @@ def test_a_second_signal_while_the_command_ends_is_recorded_not_raised(default_s
             stop.check()
 
 
+class _Finalised:
+    """An object whose finaliser runs the stop's handler (a signal handled while the garbage collector finalises it:
+    Python cannot raise the handler's exception from there)."""
+
+    def __init__(self, sig):
+        self.sig = sig
+
+    def __del__(self):
+        signal.raise_signal(self.sig)
+
+
+def test_a_stop_handled_inside_a_finaliser_says_nothing_and_stays_pending(default_signals, monkeypatch):
+    """A signal handled while a ``__del__`` runs (seen as ``Exception ignored in: <function ZipFile.__del__>`` and
+    its traceback on a stopped ``sblsim run`` of FMUs): nothing goes to the process's hook for what Python cannot
+    raise (it prints them), the stop is pending and the next check raises it; another exception a finaliser cannot
+    raise goes to it as before, and so does a KeyboardInterrupt of no stop; the hook is the process's own again
+    after the command."""
+    import gc
+
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda unraisable: seen.append(unraisable.exc_type))
+    hook = sys.unraisablehook
+    with stop.stop_on():
+        _Finalised(signal.SIGTERM)  # (made and let go at once: its finaliser runs the handler)
+        gc.collect()
+        assert stop.pending() == signal.SIGTERM and seen == []
+        with pytest.raises(KeyboardInterrupt):
+            stop.check()
+
+    class Failing:
+        def __del__(self):
+            raise ValueError("a finaliser's own fault")
+
+    class Interrupted:
+        def __del__(self):
+            raise KeyboardInterrupt
+
+    with stop.stop_on():
+        Failing()
+        Interrupted()  # no signal recorded: not the stop's
+        gc.collect()
+        assert seen == [ValueError, KeyboardInterrupt] and stop.pending() is None
+    assert sys.unraisablehook is hook
+
+
 POOL = textwrap.dedent('''
     import multiprocessing, signal
     from concurrent.futures import ProcessPoolExecutor
