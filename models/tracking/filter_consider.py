@@ -185,26 +185,31 @@ def consider_terms_along(record: TrackRecord, receivers: np.ndarray, c: float, s
     m, size = record.x_filtered.shape
     p = receivers.shape[0] * receivers.shape[1] + 1
     args = (record, receivers, c, sigma_toa, survey_sigma, sigma_c)
+
+    def block(a: int, b: int) -> np.ndarray:  # the filter's sensitivity of pings a to b (NaN before the start)
+        sens = np.full((b - a, size, p), np.nan)
+        for k, S in _recursion(*args, a, b, edges[a]):
+            sens[k - a] = S
+        return sens
+
+    def terms(out: np.ndarray, sens: np.ndarray, a: int, b: int) -> None:  # the terms of the rows among a to b
+        lo, hi = np.searchsorted(rows, [a, b])
+        out[lo:hi] = consider_terms(sens, rows[lo:hi] - a)
+
     filtered = np.empty((len(rows), size, size))
     back = np.empty((len(rows), size, size)) if smoothed else None
-    edges: dict[int, np.ndarray | None] = {}  # each block's entering S (None before the start)
-    S = None
+    edges: dict[int, np.ndarray | None] = {0: None}  # each block's entering S (None before the start)
     for a in range(0, m, BLOCK):
         b = min(a + BLOCK, m)
-        edges[a] = S
-        sens = np.full((b - a, size, p), np.nan)
-        for k, Sk in _recursion(*args, a, b, edges[a]):
-            sens[k - a] = S = Sk
-        lo, hi = np.searchsorted(rows, [a, b])
-        filtered[lo:hi] = consider_terms(sens, rows[lo:hi] - a)
+        sens = block(a, b)
+        edges[b] = sens[-1].copy() if b > record.start else None  # (a copy: not the whole block held)
+        terms(filtered, sens, a, b)
     if not smoothed:
         return filtered, None
     k0, after = record.start, None  # after: the smoother's S at the next block's first ping
     for a in range(((m - 1) // BLOCK) * BLOCK, -1, -BLOCK) if m else ():
         b = min(a + BLOCK, m)
-        sens = np.full((b - a, size, p), np.nan)
-        for k, Sk in _recursion(*args, a, b, edges[a]):
-            sens[k - a] = Sk
+        sens = block(a, b)
         first = max(a, k0)
         if first < b:
             ends = min(b + 1, m)  # the gains of the block's pings but the record's last (the next ping's P and F)
@@ -215,8 +220,7 @@ def consider_terms_along(record: TrackRecord, receivers: np.ndarray, c: float, s
                 nxt = after if k == b - 1 else sens[k + 1 - a]
                 sens[k - a] = sens[k - a] + gains[k - first] @ (nxt - record.F[k + 1] @ sens[k - a])
             after = sens[first - a].copy()
-        lo, hi = np.searchsorted(rows, [a, b])
-        back[lo:hi] = consider_terms(sens, rows[lo:hi] - a)
+        terms(back, sens, a, b)
     return filtered, back
 
 
