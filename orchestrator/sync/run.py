@@ -59,6 +59,8 @@ BIN_HOURS_RANGE = (0.05, 168.0)
 #: [s] the longest a receiver is taken to have been off between the last detection before its time went back in
 #: the file's order and the first after (a download's), for the search of its new part's shift (breaks.part_shifts).
 RESET_GAP = 86400.0
+#: The note naming the receivers table's sync tags no receiver heard (a sync tag that died, or an ID mistyped).
+NEVER_HEARD = "sync tags never heard"
 
 
 @dataclass
@@ -285,7 +287,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     n_receivers = len(names)
     never = [tag_names[i] for i in range(len(tag_names)) if not (tag == i).any()]
     if never:
-        notes.append(f"sync tags never heard: {', '.join(never)}")
+        notes.append(f"{NEVER_HEARD}: {', '.join(never)}")
 
     # a receiver's time gone back (the reader's clock_part): each later part a clock, aligned for the grouping alone
     part = sync["clock_part"].to_numpy(np.int64) if "clock_part" in sync else None

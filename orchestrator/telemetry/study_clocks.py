@@ -13,7 +13,7 @@ import numpy as np
 from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
-from sblsim.orchestrator.sync.run import synchronise
+from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
 
@@ -61,8 +61,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
-            # and why a receiver is not synchronised
-            notes.extend(n for n in s.get("notes", []) if n.startswith(NOT_SYNCHRONISED))
+            # why a receiver is not synchronised, and the sync tags nobody heard (one mistyped, or dead)
+            notes.extend(n for n in s.get("notes", []) if n.startswith((NOT_SYNCHRONISED, NEVER_HEARD)))
             info = {"source": "synchronised here", "reference_receiver": s["reference_receiver"],
                     "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
                     "clock_breaks": s["clock_breaks"],

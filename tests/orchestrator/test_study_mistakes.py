@@ -99,3 +99,21 @@ def test_the_tracks_near_the_clean_study_s_and_consistent(runs):
         assert rms < 1.3 * np.sqrt(np.mean(before[tag][0] ** 2)) and rms < 0.5, tag
     nees = np.concatenate([after[tag][1] for tag in after])
     assert 1.0 <= nees.mean() <= 3.0, nees.mean()  # 2-D: 2 expected
+
+
+def test_a_sync_tag_nobody_heard_is_said(tmp_path):
+    """A deployment's sync-tag cell naming a tag no receiver heard (an ID mistyped: its last digit wrong) is said in
+    the study's notes, the console's ``note:`` lines, by its name as the deployments give it; the tags are tracked
+    on the other sync tags' clocks."""
+    sim = simulate_study(n_receivers=5, n_tags=1, days=0.05, redeployed=0, seed=2)
+    files = sim.write(tmp_path, "vue")
+    given = sim.deployments["transmitter"].iloc[2]
+    typo = given[:-1] + "9"  # A69-1601-60002 as A69-1601-60009: five sync tags, 60000 to 60004
+    assert typo not in set(sim.detections["transmitter"])
+    sim.deployments.assign(transmitter=sim.deployments["transmitter"].replace(given, typo)).to_csv(
+        files["deployments"], index=False, float_format="%.10f")
+    result = sblsim.track(files["detections"], receivers=files["deployments"], tags=files["tags"], workers=1)
+    said = [n for n in result.summary["notes"] if n.startswith("sync tags never heard")]
+    assert said == [f"sync tags never heard: {typo}"]
+    assert result.summary["clocks"]["source"] == "synchronised here"
+    assert (result.tags["status"] == "tracked").all()
