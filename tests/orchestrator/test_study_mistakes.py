@@ -4,7 +4,8 @@ the file sorted by time as an export is), stray detections 3 % of the detections
 the animals' ids, at random times) and a thin sync array (sync tags at 3 of 9 receivers), run by ``sblsim.track``
 against the same study without the mistakes: every tag tracked, the reset named in one line with its size, every
 stray row set aside and every real ping kept, the tracks against the simulated truth near the clean study's and
-their stated uncertainty consistent with their errors (2-D NEES)."""
+their stated uncertainty consistent with their errors (2-D NEES). And a deployment's sync-tag cell naming a tag no
+receiver heard (an ID mistyped) said in the study's notes."""
 
 from __future__ import annotations
 
