@@ -69,13 +69,11 @@ def test_the_fast_tier_holds_no_slow_test_and_the_tiers_hold_every_test(tmp_path
     assert len(fast) + len(slow) == len(markers) >= TESTS_BEFORE_THE_TIERS
     assert fast and slow
     # each test file of the suite keeps a test in the fast tier, but for those that are all builds, hosts or pages,
-    # and two that are whole studies tried as a user would (the strays, the clock resets and a name's folder have
-    # fast tests of their own)
+    # and one that is a whole study tried as a user would (a name's folder has fast tests of its own)
     files = {test.split("::")[0] for test in markers}
     fast_files = {test.split("::")[0] for test in fast}
     assert files - fast_files == {"tests/orchestrator/test_ssp_hosts.py", "tests/test_packaging.py",
                                   "tests/test_bench_detection.py", "tests/orchestrator/test_study_report_browser.py",
-                                  "tests/orchestrator/test_study_mistakes.py",
                                   "tests/orchestrator/test_study_folders.py"}
 
 
