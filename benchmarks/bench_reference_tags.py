@@ -70,14 +70,8 @@ def study(seed: int, sigma: float, receivers: int, hours: float, folder: Path) -
     sim = simulate_study(n_receivers=receivers, n_tags=0, days=hours / 24.0, redeployed=0, seed=seed)
     files = sim.write(folder / "in", "vue")
     off = sim.positions[:, :2] + sigma * np.random.default_rng(100 + seed).normal(size=(len(sim.positions), 2))
-    lat, lon = sim.frame.to_latlon(off[:, 0], off[:, 1])
-    deployments = sim.deployments.assign(deploy_lat=lat, deploy_long=lon)
-    at = np.sort(np.random.default_rng(200 + seed).choice(len(deployments), REFERENCES, replace=False))
-    references = deployments["transmitter"].iloc[at].tolist()
-    sheet = sim.sheet.copy()
-    sheet.loc[sheet["transmitter"].isin(references), "role"] = "reference"
-    sheet["receiver"] = sheet["transmitter"].map(dict(zip(references, deployments["station"].iloc[at]))).fillna("")
-    deployments.loc[deployments.index[at], "transmitter"] = ""
+    at = np.sort(np.random.default_rng(200 + seed).choice(len(sim.deployments), REFERENCES, replace=False))
+    deployments, sheet, references = sim.with_reference_tags(at, off)
     deployments.to_csv(files["deployments"], index=False, float_format="%.10f")
     sheet.to_csv(files["tags"], index=False)
     truth = {tag: sim.positions[k, :2] for tag, k in zip(references, at)}

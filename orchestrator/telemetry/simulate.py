@@ -97,6 +97,28 @@ class SimulatedStudy:
         epoch = np.asarray(epoch, float)
         return np.c_[np.interp(epoch, on_clock, truth["x"]), np.interp(epoch, on_clock, truth["y"])]
 
+    def with_reference_tags(self, at, positions: np.ndarray | None = None
+                            ) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+        """The study's tables with the sync tags of deployments ``at`` (their rows in ``deployments``) given as
+        reference tags at their receivers, as a study with reference tags brings them: the deployments with those
+        sync-tag cells emptied (the other sync tags synchronise) and, where ``positions`` (deployments, 2) [m in the
+        frame] are given, their latitude and longitude there (a survey's, off from the truth); the tag sheet with
+        their ``role`` ``reference`` and a ``receiver`` column naming each one's station (empty for the other
+        tags); their transmitters, in ``at``'s order. The tags stay where they were simulated: at their receivers'
+        true positions (``positions`` of this study)."""
+        deployments = self.deployments.copy()
+        if positions is not None:
+            lat, lon = self.frame.to_latlon(positions[:, 0], positions[:, 1])
+            deployments = deployments.assign(deploy_lat=lat, deploy_long=lon)
+        rows = deployments.index[list(at)]
+        references = deployments.loc[rows, "transmitter"].tolist()
+        sheet = self.sheet.copy()
+        sheet.loc[sheet["transmitter"].isin(references), "role"] = "reference"
+        sheet["receiver"] = sheet["transmitter"].map(dict(zip(references, deployments.loc[rows, "station"]))
+                                                     ).fillna("")
+        deployments.loc[rows, "transmitter"] = ""
+        return deployments, sheet, references
+
     def write(self, folder: Path | str, format: str = "vue") -> dict[str, Path]:
         """Write the study's files into ``folder``: ``deployments.csv``, ``tags.csv`` (and each ``pbi`` tag's
         sequence), and ``detections.csv`` as a VUE export (``vue``), a Fathom CSV (``fathom``) or a GLATOS

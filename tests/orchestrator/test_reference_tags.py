@@ -308,14 +308,8 @@ def test_the_survey_error_the_synchronisation_sees_is_taken_where_none_is_stated
     sim = simulate_study(n_receivers=9, n_tags=1, days=0.25, redeployed=0, seed=4)
     files = sim.write(tmp_path / "in", "vue")
     off = sim.positions[:, :2] + 2.0 * np.random.default_rng(11).normal(size=(len(sim.positions), 2))
-    lat, lon = sim.frame.to_latlon(off[:, 0], off[:, 1])
-    deployments = sim.deployments.assign(deploy_lat=lat, deploy_long=lon)
-    refs = deployments["transmitter"].iloc[list(AT[:1])].tolist()
-    deployments.loc[list(AT[:1]), "transmitter"] = ""
+    deployments, sheet, refs = sim.with_reference_tags(AT[:1], off)
     deployments.to_csv(files["deployments"], index=False, float_format="%.10f")
-    sheet = sim.sheet.copy()
-    sheet.loc[sheet["transmitter"].isin(refs), "role"] = "reference"
-    sheet["receiver"] = np.where(sheet["transmitter"].isin(refs), deployments.loc[AT[0], "station"], "")
     sheet.to_csv(files["tags"], index=False)
     chosen = refs + [t for t in sim.sheet["transmitter"] if t not in set(sim.deployments["transmitter"])]
     found = {}
@@ -409,14 +403,8 @@ def _truth_array(seed: int, folder) -> list[tuple[float, float]]:
     files = sim.write(folder / "in", "vue")
     rng = np.random.default_rng(100 + seed)
     off = sim.positions[:, :2] + TRUTH_SURVEY * rng.normal(size=(len(sim.positions), 2))
-    lat, lon = sim.frame.to_latlon(off[:, 0], off[:, 1])
-    deployments = sim.deployments.assign(deploy_lat=lat, deploy_long=lon)
-    at = np.sort(rng.choice(len(deployments), 3, replace=False))
-    references = deployments["transmitter"].iloc[at].tolist()
-    sheet = sim.sheet.copy()
-    sheet.loc[sheet["transmitter"].isin(references), "role"] = "reference"
-    sheet["receiver"] = sheet["transmitter"].map(dict(zip(references, deployments["station"].iloc[at]))).fillna("")
-    deployments.loc[deployments.index[at], "transmitter"] = ""
+    at = np.sort(rng.choice(len(sim.deployments), 3, replace=False))
+    deployments, sheet, references = sim.with_reference_tags(at, off)
     deployments.to_csv(files["deployments"], index=False, float_format="%.10f")
     sheet.to_csv(files["tags"], index=False)
     outcome = run_study(files["detections"], files["deployments"], files["tags"], workdir=folder / "work",

@@ -342,3 +342,30 @@ def test_the_simulated_truth_is_read_on_a_deployments_clock():
                                0.5 * (xy[:-1] + xy[1:]), rtol=0, atol=1e-6)
     unread = sim.truth_at(tag, sim.origin + middle, 2)  # the true times taken as the clock's: off by its offset
     assert np.abs(unread - 0.5 * (xy[:-1] + xy[1:])).max() > 1e-3
+
+
+def test_a_simulated_studys_sync_tags_given_as_reference_tags():
+    """``with_reference_tags``: the sync tags of the deployments asked for are reference tags of the sheet at their
+    stations, their sync-tag cells emptied and no other; the positions given are the deployments' latitude and
+    longitude (pyproj's inverse of the study's UTM zone, independently); the study's own tables untouched."""
+    sim = simulate_study(n_receivers=4, n_tags=1, days=0.02, redeployed=0, seed=3)
+    before = (sim.deployments.copy(), sim.sheet.copy())
+    off = sim.positions[:, :2] + np.array([3.0, -2.0])
+    deployments, sheet, references = sim.with_reference_tags([2, 0], off)
+    assert references == [sim.deployments["transmitter"].iloc[2], sim.deployments["transmitter"].iloc[0]]
+    assert deployments["transmitter"].tolist() == ["", sim.deployments["transmitter"].iloc[1], "",
+                                                   sim.deployments["transmitter"].iloc[3]]
+    mine = sheet.set_index("transmitter")
+    for tag, k in zip(references, [2, 0]):
+        assert mine.loc[tag, "role"] == "reference"
+        assert mine.loc[tag, "receiver"] == sim.deployments["station"].iloc[k]
+    others = sheet[~sheet["transmitter"].isin(references)]
+    assert (others["receiver"] == "").all() and (others["role"] != "reference").all()
+    inverse = Transformer.from_crs(sim.frame.crs, "EPSG:4326", always_xy=True)
+    lon, lat = inverse.transform(off[:, 0], off[:, 1])
+    np.testing.assert_allclose(deployments["deploy_lat"], lat, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(deployments["deploy_long"], lon, rtol=0, atol=1e-9)
+    pd.testing.assert_frame_equal(sim.deployments, before[0])
+    pd.testing.assert_frame_equal(sim.sheet, before[1])
+    unmoved, _, _ = sim.with_reference_tags([1])
+    assert unmoved[["deploy_lat", "deploy_long"]].equals(sim.deployments[["deploy_lat", "deploy_long"]])
