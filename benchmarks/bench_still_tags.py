@@ -10,9 +10,9 @@ the pings): for ``--seeds`` still tags, the share of rows flagged and the mean 2
 truth with the covariance reported; the same tags' fixes under the permutation test of their order alone (the verdict
 before: :func:`sblsim.models.tracking.stationary.moved`); a tag moved 20 m at its 360th ping, where its rows are
 flagged ``tag_moved`` from (None where none is); a random walk of 2 m per ping (an animal); the share of its
-arrivals each one's place explains (``explained_share``: the still tags', the moved tags' still parts', the walks';
-their least, median and largest); and the verdict's own time on 10⁴ fixes, still and moved (best of three). Prints a
-JSON line last.
+arrivals each one's place explains (``explained_share``: the still tags', the moved tags' two places' and their second
+places', the walks'; their least, median and largest); and the verdict's own time on 10⁴ fixes, still and moved
+(best of three). Prints a JSON line last.
 
 The record varied the way real still tags' records differ: ``--interval`` the pings' interval [s] (uniform between
 the two: a sync tag's 540 660), ``--pings`` their count (a season's), ``--receivers`` the first K receivers alone (4
@@ -156,7 +156,8 @@ def measure(seeds: int, how: Record = Record()) -> dict:
     """The figures (module docstring) on records made as ``how`` says."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        nees, flagged, rows, order_moved, seconds, shares = [], 0, 0, 0, [], {"still": [], "moved": [], "walk": []}
+        nees, flagged, rows, order_moved, seconds = [], 0, 0, 0, []
+        shares = {"still": [], "moved": [], "second": [], "walk": []}
         for seed in range(seeds):
             outcome, places, took = tracked(folder, seed, how=how)
             still = outcome.summary["motion"]["still"]
@@ -175,7 +176,9 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             offsets.append(first - how.pings // 2 if reasons.any() else None)  # None: no row flagged tag_moved
             before_ok.append(bool((outcome.track["quality"].to_numpy()[:first] == "ok").all()))
             change = outcome.summary["motion"]["still"]["change"]  # None: the move not found (NaN)
-            shares["moved"].append(outcome.summary["motion"]["still"]["explained_share"])  # its still part's
+            shares["moved"].append(outcome.summary["motion"]["still"]["explained_share"])  # its two places'
+            second = change.get("second_place_explained_share") if change else None
+            shares["second"].append(float("nan") if second is None else second)
             distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])) if change
                             else float("nan"))
         animals = []
@@ -189,7 +192,7 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             "moved_first_flag_offsets": offsets, "moved_rows_before_ok": before_ok,
             "moved_second_place_error_m": distance, "animal_verdicts": animals,
             "explained_share": {kind: [float(np.nanmin(v)), float(np.nanmedian(v)), float(np.nanmax(v))]
-                                for kind, v in shares.items()},
+                                for kind, v in shares.items() if np.isfinite(v).any()},
             "verdict_1e4_still_s": verdict_time(0.0), "verdict_1e4_moved_s": verdict_time(20.0)}
 
 
@@ -231,7 +234,8 @@ def main() -> None:
           f"walk of 2 m per ping: {r['animal_verdicts']}")
     said = "; ".join(f"{kind} {low:.3f} to {high:.3f} (median {mid:.3f})"
                      for kind, (low, mid, high) in r["explained_share"].items())
-    print(f"the share of its arrivals each place explains (the moved tags' still parts'): {said}")
+    print(f"the share of its arrivals each place explains (the moved tags' two places', their second places'): "
+          f"{said}")
     print(f"the verdict on 10^4 fixes: {r['verdict_1e4_still_s']:.3f} s still, {r['verdict_1e4_moved_s']:.3f} s moved "
           "(best of three)")
     print(json.dumps(r))

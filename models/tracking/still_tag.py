@@ -219,6 +219,42 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
             fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)))
 
 
+def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma, sigma, last, first):
+    """A still tag that moved once after its last still trusted fix ``last`` (its first moved one ``first``): the
+    split (the first row at its second place; the rows between the two given to the place their arrivals fit,
+    :func:`split_ping`), its first place from the rows before the split and its second from the rest (each
+    :func:`_place`'s tuple; the second None where too few receivers heard it there)."""
+    rows = np.arange(len(toa))
+    before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
+    split = last + 1
+    if first > last + 1:  # the rows between the two trusted fixes: each side's place from its own side's rows
+        try:
+            went = stationary_track(toa[first:], positions, c, fx[first:], sigma_toa).position
+        except ModelError:  # too few receivers heard it after: the rows between flagged
+            went = None
+        if went is not None:
+            split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, went)
+    if split != last + 1:
+        before = _place(toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
+    try:  # where it went: the pooled fit of the rows from the split
+        gone = _place(toa, positions, c, fx, rows[split:], sigma_toa, survey, speed_sigma, clock_sigma)
+    except ModelError:
+        gone = None
+    return split, before, gone
+
+
+def _two_places_explained(toa: np.ndarray, split: int, first: float, second: float | None) -> float:
+    """The share of a moved tag's arrivals its two places explain (:func:`explained_share`: ``first`` of the rows of
+    ``toa`` (m, n) before ``split``, ``second`` of the rest), each weighed by its arrivals; the first's alone where
+    the second is None (not fitted) or NaN. A tag that went from one place to another (a reference tag dragged, a
+    dead fish) has both explain their arrivals; an animal whose fixes find a still part does not."""
+    heard = np.isfinite(np.asarray(toa, float)).sum(axis=1)
+    h1, h2 = float(heard[:split].sum()), float(heard[split:].sum())
+    if second is None or not np.isfinite(second) or h2 == 0:
+        return first
+    return (first * h1 + second * h2) / (h1 + h2)
+
+
 def _beyond(spread: np.ndarray, own: np.ndarray) -> np.ndarray:
     """The receivers' jackknife ``spread`` (dim, dim) [m²] beyond a fit's ``own`` covariance: the positive part of
     their difference (its eigenvalues below 0 set to 0), so that ``own`` plus it is at least each of the two in every
@@ -302,12 +338,14 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     verdict = sv.still_verdict(fx, fc, fe, trusted, slow, multipath, order_test=explained < MIN_EXPLAINED)
     count, ratio, ordered = moved(fx, fe, trusted)
     went, throughout = verdict.change is not None and ordered, verdict.throughout
-    if went and not throughout:  # its still part: the rows to its last still trusted fix
+    places_tried = 1
+    if went and not throughout:  # its still part (the rows to its last still trusted fix) and where it went
         last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
-        before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
-        explained = before[5]
-    # no one place (the still part's where it moved): it moved the whole time where its fixes say it moved or
-    # wander, else unchecked
+        args = (toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma)
+        split, before, gone = _moved_once(*args, sigma, last, first)
+        explained, places_tried = _two_places_explained(toa, split, before[5], None if gone is None else gone[5]), 2
+    # no one place (the still part's and where it went, where it moved): it moved the whole time where its fixes say
+    # it moved or wander, else unchecked
     scattered = verdict.fixes >= UNCHECKED_BELOW and (not went or not throughout) and explained < MIN_EXPLAINED
     throughout = throughout or (scattered and went)
     went = went or (scattered and throughout)
@@ -318,31 +356,21 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     after, change = np.zeros(m, bool) | (went and throughout), None
     if went and not throughout:  # the rows from the split moved
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
-        split = last + 1
-        if first > last + 1:  # the rows between the two trusted fixes: each side's place from its own side's rows
-            try:
-                gone = stationary_track(toa[first:], positions, c, fx[first:], sigma_toa).position
-            except ModelError:  # too few receivers heard it after: the rows between flagged
-                gone = None
-            if gone is not None:
-                split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, gone)
         after[split:] = True
-        pooled, extra, spread, gains, changed, explained = before if split == last + 1 else _place(
-            toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
+        pooled, extra, spread, gains, changed, _ = before
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)
         places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
         change["split_ping"] = split
-        try:  # where it went: the pooled fit of the rows from the split
-            gone, gone_extra = _place(toa, positions, c, fx, rows[split:], sigma_toa, survey, speed_sigma,
-                                      clock_sigma)[:2]
-        except ModelError:  # too few receivers heard it there: its fixes' median
-            change |= {"second_place": np.nanmedian(fx[split:], axis=0).tolist(), "second_place_sigma_m": None}
+        if gone is None:  # too few receivers heard it there: its fixes' median
+            change |= {"second_place": np.nanmedian(fx[split:], axis=0).tolist(), "second_place_sigma_m": None,
+                       "second_place_explained_share": None}
         else:
-            moved_emissions, moved_kept = _rows(gone, rows[split:], m)
+            moved_emissions, moved_kept = _rows(gone[0], rows[split:], m)
             emissions[split:], kept[split:] = moved_emissions[split:], moved_kept[split:]
-            places[split:], own[split:], held[split:] = gone.position, gone.covariance, gone_extra
-            change |= {"second_place": gone.position.tolist(),
-                       "second_place_sigma_m": float(np.sqrt(np.trace((gone.covariance + gone_extra)[:2, :2])))}
+            places[split:], own[split:], held[split:] = gone[0].position, gone[0].covariance, gone[1]
+            change |= {"second_place": gone[0].position.tolist(),
+                       "second_place_sigma_m": float(np.sqrt(np.trace((gone[0].covariance + gone[1])[:2, :2]))),
+                       "second_place_explained_share": _number(gone[5])}
         change["distance_m"] = float(np.linalg.norm(np.asarray(change["second_place"])[:2] - pooled.position[:2]))
     kp = np.flatnonzero(np.isfinite(emissions))
     if change is not None:
@@ -351,7 +379,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     said = "unchecked" if unchecked else "moving" if went and throughout else "moved" if went else "still"
     summary = {"verdict": said,
                "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
-               "explained_share": _number(explained), "scattered": bool(scattered),
+               "explained_share": _number(explained), "places_explaining": places_tried, "scattered": bool(scattered),
                "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,
                "detectable_step_m": [_number(x) for x in verdict.detectable],

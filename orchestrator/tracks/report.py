@@ -15,6 +15,16 @@ from sblsim.orchestrator.tracks.speed import replaced_line
 from sblsim.orchestrator.tracks.tracker import noise_line
 
 
+def _not_stayed(change: dict) -> str:
+    """What a moved tag's console line adds where its second place explains fewer than :data:`MIN_EXPLAINED` of the
+    arrivals after the change (it did not stay there: every row after it flagged all the same)."""
+    share = change.get("second_place_explained_share")
+    if share is None or share >= MIN_EXPLAINED:
+        return ""
+    return (f" (that place explains {100 * share:.0f} % of the arrivals after the change, fewer than "
+            f"{100 * MIN_EXPLAINED:.0f} %: it did not stay there)")
+
+
 def ping_type_line(summary: dict[str, Any]) -> str:
     """The console's line on the ping type and the gaps of a track's ``summary``."""
     p = summary["ping_type"]
@@ -94,7 +104,9 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
             "the speed at its nearer end", True)
     m = s["motion"]
     still = m.get("still") or {}
-    explains = (f"one place explains {100 * (still.get('explained_share') or 0):.0f} % of its arrivals at the timing "
+    places = ("one place explains" if still.get("places_explaining", 1) == 1 else
+              "two places (one before a change its fixes found, one after) explain")
+    explains = (f"{places} {100 * (still.get('explained_share') or 0):.0f} % of its arrivals at the timing "
                 f"noise taken, fewer than {100 * MIN_EXPLAINED:.0f} %")
     if still.get("verdict") == "unchecked" and still.get("scattered"):
         say(f"sblsim: warning: whether the tag moved is unchecked: {explains}, and its {still['trusted_fixes']} "
@@ -123,7 +135,7 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
                 f"{change['last_still_ping']}, the pings between given to the place their arrivals fit): from ping "
                 f"{change['first_moved_ping']} on its fixes lie {change['distance_m']:.3g} m from its place, "
                 f"{beyond}; its {change['rows_moved']} rows from ping {split} flagged tag_moved and placed where it "
-                "went, the rows before it kept", True)
+                f"went, the rows before it kept{_not_stayed(change)}", True)
     quality = quality_line(s)
     say("  " + quality)
     for late in s["receivers_late"]:

@@ -32,10 +32,11 @@ CANAL6 = np.array([[0.0, 5.0], [200.0, -5.0], [400.0, 5.0], [495.0, 100.0], [505
 
 def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = None,
             walk: float | None = None, receivers: int = len(RECEIVERS), layout: np.ndarray = RECEIVERS,
-            tag: np.ndarray = TAG, noise: float = SIGMA) -> tuple[Path, Path, np.ndarray]:
+            tag: np.ndarray = TAG, noise: float = SIGMA, walk_from: int = 0) -> tuple[Path, Path, np.ndarray]:
     """A tag's times of arrival (a ping every 120 ± 24 s over a day, each of the first ``receivers`` receivers of
     ``layout`` hearing 80 % of them with ``noise`` [s]) in water of 1,480 ± 5 m/s (a sine over the day, random
-    phase), the tag at ``tag``: the TOA file, the receivers file and the tag's place at each ping."""
+    phase), the tag at ``tag`` (moved by ``move`` half way; a random walk of ``walk`` [m] a ping from ping
+    ``walk_from``): the TOA file, the receivers file and the tag's place at each ping."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(96.0, 144.0, n))
     c = 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 2 * np.pi))
@@ -43,7 +44,7 @@ def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = N
     if move is not None:
         places[n // 2:] += move
     if walk is not None:
-        places = places + np.cumsum(rng.normal(scale=walk, size=(n, 2)), axis=0)
+        places[walk_from:] += np.cumsum(rng.normal(scale=walk, size=(n - walk_from, 2)), axis=0)
     toa = t[:, None] + np.linalg.norm(places[:, None] - layout[None, :receivers], axis=2) / c[:, None]
     toa = toa + noise * rng.normal(size=toa.shape)
     toa[rng.random(toa.shape) > 0.8] = np.nan
@@ -53,11 +54,11 @@ def _record(tmp_path: Path, seed: int, n: int = 720, move: np.ndarray | None = N
     return tmp_path / "toa.txt", tmp_path / "receivers.csv", places
 
 
-def _explained(toa: Path, still: dict, layout: np.ndarray, c: float) -> float:
-    """The share of a TOA file's arrivals within 6.1 σ (:data:`SIGMA`) of a still tag's ``place`` at ``c`` [m/s],
-    each ping's emission time the median of its arrivals' (an independent count of
+def _explained(toa: Path, still: dict, layout: np.ndarray, c: float, rows: slice = slice(None)) -> float:
+    """The share of a TOA file's arrivals (of its pings ``rows``) within 6.1 σ (:data:`SIGMA`) of a still tag's
+    ``place`` at ``c`` [m/s], each ping's emission time the median of its arrivals' (an independent count of
     :func:`~sblsim.models.tracking.still_tag.explained_share`'s, which takes the robust fit's weighted mean)."""
-    y = pd.read_csv(toa, sep=" ", na_values="NA").to_numpy(float)
+    y = pd.read_csv(toa, sep=" ", na_values="NA").to_numpy(float)[rows]
     r = y - np.linalg.norm(np.asarray(still["place"])[None, :2] - layout[None, :y.shape[1]], axis=2) / c
     r = r - np.nanmedian(r, axis=1, keepdims=True)
     return float(np.mean(np.abs(r[np.isfinite(r)]) <= 6.1 * SIGMA))
@@ -204,6 +205,60 @@ def test_an_animal_whose_fixes_find_a_still_part_no_place_explains_is_moving(tmp
     still = outcome.summary["motion"]["still"]
     assert still["verdict"] == "moved" and still["explained_share"] > 0.99 and not still["scattered"], still
     assert abs(still["change"]["split_ping"] - 360) <= 3, still["change"]
+
+
+@pytest.mark.slow
+def test_an_animal_whose_two_places_explain_too_few_arrivals_is_moving(tmp_path, capsys):
+    """A random walk of 2 m a ping by four receivers along the canal (seed 2): its fixes found a change after ping
+    201 and its still part's place explained 51 % of that part's arrivals, so it was called ``moved``; the place
+    after the change explains 39 % of the rest, the two together fewer than
+    :data:`~sblsim.models.tracking.still_tag.MIN_EXPLAINED`: ``moving``, every row flagged, the console saying two
+    places explain too few."""
+    from sblsim.models.tracking.still_tag import MIN_EXPLAINED
+    from sblsim.orchestrator.cli import main
+
+    toa, receivers, _ = _record(tmp_path, 2, walk=2.0, receivers=4, layout=CANAL, tag=CANAL_TAG)
+    out = tmp_path / "walk"
+    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
+                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "two places" in line]
+    summary = json.loads((out / "summary.json").read_text())
+    still = summary["motion"]["still"]
+    assert still["verdict"] == "moving" and still["change"] is None and still["places_explaining"] == 2, still
+    assert still["explained_share"] < MIN_EXPLAINED and still["scattered"], still
+    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert (np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0).all()
+    assert len(said) == 1 and "the tag moved the whole time" in said[0], said
+
+
+@pytest.mark.slow
+def test_a_still_tag_that_swims_off_is_moved_from_its_change_and_said_not_to_stay(tmp_path, capsys):
+    """A tag still for 600 pings, then a random walk of 2 m a ping (taken by an animal): ``moved`` from ping 600,
+    the rows before it ``ok``; its place after the change explains fewer than half of the arrivals there (counted
+    apart here: one speed, so the water's change counts too), and the console says it did not stay; its first place
+    explains more than half of its own."""
+    from sblsim.models.tracking.still_tag import MIN_EXPLAINED
+    from sblsim.orchestrator.cli import main
+
+    toa, receivers, places = _record(tmp_path, 0, walk=2.0, walk_from=600)
+    out = tmp_path / "off"
+    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
+                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "did not stay there" in line]
+    summary = json.loads((out / "summary.json").read_text())
+    still, c = summary["motion"]["still"], summary["sound_speed"]["sound_speed_m_s"]
+    change = still["change"]
+    assert still["verdict"] == "moved" and still["places_explaining"] == 2, still
+    assert abs(change["split_ping"] - 600) <= 3, change
+    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    moved = np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0
+    assert not moved[:change["split_ping"]].any() and moved[change["split_ping"]:].all()
+    split = slice(change["split_ping"], None)
+    assert change["second_place_explained_share"] < MIN_EXPLAINED
+    assert _explained(toa, {"place": change["second_place"]}, RECEIVERS, c, split) < MIN_EXPLAINED
+    assert _explained(toa, still, RECEIVERS, c, slice(None, change["split_ping"])) > MIN_EXPLAINED
+    assert np.linalg.norm(np.asarray(still["place"])[:2] - places[0]) < 0.5
+    assert len(said) == 1 and f"{100 * change['second_place_explained_share']:.0f} %" in said[0], said
 
 
 @pytest.mark.slow
