@@ -14,6 +14,7 @@ a file is ever taken as a path. Every error is one line naming the file, its lin
 
 from __future__ import annotations
 
+import csv
 import io
 import re
 from pathlib import Path
@@ -87,6 +88,69 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
     if nul >= 0:
         raise not_text(name, what, data, nul)
     return _decoded(data, name, what, fallback)
+
+
+#: The characters of a text's end :func:`cut_short` reads: two of its longest lines.
+TAIL_CHARS = 2 * MAX_LINE_BYTES
+
+
+def cut_short(text: str, name: str, what: str, by_record: bool = False, whole: bool = True) -> None:
+    """Refuse a CSV text cut short (an export, a download or a copy interrupted): it ends without a line break and
+    its last record holds fewer cells than the record before it (Python's :mod:`csv` reads the records, a quoted cell
+    across lines one record; ``by_record``: than the last record before it whose first cell is the same, a Fathom
+    CSV's record type). A text that ends in a line break, or whose last record holds as many cells, passes (a file cut
+    at a line's end, or inside a line's last cell, cannot be told from a whole one).
+
+    Parameters
+    ----------
+    text : str
+        The text (only its last :data:`TAIL_CHARS` characters are read, from the first line that starts in them).
+    name, what : str
+        The file's name and what it is, for the refusal.
+    by_record : bool
+        Records of several types, each of its own width (Fathom's).
+    whole : bool
+        ``text`` begins where the file does (false: its first line may be cut where it begins, and is not read).
+
+    Raises
+    ------
+    ModelError
+        One line naming the file, the two records' cells and what to do.
+    """
+    if not text or text.endswith(("\n", "\r")):
+        return
+    tail = text[-TAIL_CHARS:]
+    if not whole or len(tail) < len(text):  # from the first line that starts in it
+        tail = tail[min((k for k in (tail.find("\n"), tail.find("\r")) if k >= 0), default=len(tail)) + 1:]
+    try:
+        records = [r for r in csv.reader(io.StringIO(tail, newline="")) if any(c.strip() for c in r)]
+    except csv.Error:  # a cell beyond csv's field limit: not judged here (the table's own reading bounds it)
+        return
+    if len(records) < 2:
+        return
+    last = records[-1]
+    for before in reversed(records[:-1]):
+        if by_record and before[:1] != last[:1]:
+            continue
+        if len(last) < len(before):
+            raise ModelError(f"{what}: {name!r}: its last line ends without a line break and holds {len(last)} cells "
+                             f"where the line before holds {len(before)}: the file is cut short (an export, download "
+                             "or copy interrupted); allowed: whole lines (export it again, or delete the cut line)")
+        return
+
+
+def tail_text(path: Path, size: int = TAIL_CHARS) -> tuple[str, bool]:
+    """A file's last ``size`` bytes as text (UTF-8, else Latin-1; a character cut where they begin replaced), and
+    whether they are the whole file (:func:`cut_short`'s ``whole``)."""
+    with open(path, "rb") as handle:
+        handle.seek(0, io.SEEK_END)
+        end = handle.tell()
+        handle.seek(max(0, end - size))
+        data = handle.read(size)
+    try:
+        return data.decode("utf-8"), end <= size
+    except UnicodeDecodeError:
+        return (data.decode("utf-8", errors="replace") if end > size else data.decode("latin-1")), end <= size
 
 
 def _decoded(data: bytes, name: str, what: str, fallback: str | None = None) -> str:
@@ -338,5 +402,6 @@ def shown_header(header: list[str]) -> str:
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["UNITS", "UNIT_NAME", "column", "named", "normal_name", "numbers", "pattern", "per_value", "read_text",
-           "refuse", "shown_header", "text_table", "too_large", "trimmed", "units_row"]
+__all__ = ["TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "named", "normal_name", "numbers", "pattern",
+           "per_value", "read_text", "refuse", "shown_header", "tail_text", "text_table", "too_large", "trimmed",
+           "units_row"]

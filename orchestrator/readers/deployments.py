@@ -55,6 +55,7 @@ from sblsim.orchestrator.io.frames import (
 )
 from sblsim.orchestrator.io.times import iso_utc, utc_seconds
 from sblsim.orchestrator.readers.cells import (
+    cut_short,
     named,
     numbers,
     pattern,
@@ -258,6 +259,7 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     name = str(path)
     if rows is None:
         text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
+        cut_short(text, name, what)
         header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)  # a row's line: where it starts
         del text
     else:

@@ -59,7 +59,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.readers import actel, fathom, glatos, network, otn, thelma, vue, yaps
-from sblsim.orchestrator.readers.cells import read_text, text_table
+from sblsim.orchestrator.readers.cells import cut_short, read_text, text_table
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.readers.transmitters import match
@@ -210,6 +210,7 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
                      fallback="latin-1", hint=LARGER)
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
+    cut_short(text, name, what, by_record=format == "fathom")
     if format == "fathom":
         header, body, lines = fathom.fathom_records(text, name, what, MAX_DETECTIONS, MAX_DETECTION_CELLS)
     else:

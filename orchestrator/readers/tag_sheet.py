@@ -45,6 +45,7 @@ from sblsim.orchestrator.readers.binary import LOGS, first_bytes, kind_of, log_r
 from sblsim.orchestrator.readers.burst_sequence import BURST_RANGE, read_burst_sequence
 from sblsim.orchestrator.readers.cells import (
     UNITS,
+    cut_short,
     named,
     numbers,
     pattern,
@@ -224,7 +225,10 @@ def read_tag_sheet(path: Path | str) -> TagSheet:
         table = read_workbook(path, kind, what, ALIASES["transmitter"], MAX_TAGS)
         with located(name, table.sheet):
             return tag_table(table.header, table.body, table.lines, path, what, table.index)
-    header, body, lines = text_table(read_text(path, what, MAX_DETECTION_BYTES, MAX_TAGS), name, what, MAX_TAGS)
+    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_TAGS)
+    cut_short(text, name, what)
+    header, body, lines = text_table(text, name, what, MAX_TAGS)
+    del text
     index = None
     if otn_table(header) is not None:
         body, lines, index = releases(header, body, lines, name, what)

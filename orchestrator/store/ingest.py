@@ -49,6 +49,7 @@ from sblsim.orchestrator.io.progress import Progress, ProgressSpec
 from sblsim.orchestrator.io.tables import regular_file
 from sblsim.orchestrator.io.version import installed_version
 from sblsim.orchestrator.readers.binary import refuse_log
+from sblsim.orchestrator.readers.cells import cut_short, tail_text
 from sblsim.orchestrator.readers.detections import (
     CLOCK_TOLERANCE,
     LOGGED,
@@ -262,6 +263,8 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
     refuse_log(path, _WHAT)
     size = regular_file(path, _WHAT)
     format = format or sniff_format(path)
+    tail, whole = tail_text(path)
+    cut_short(tail, str(path), _WHAT, by_record=format == "fathom", whole=whole)  # before a piece is written
     check_space(path, out, size)
     with staged_directory(out) as stage, Progress(size, "store", "B", progress) as bar:
         folder = stage / "detections"
