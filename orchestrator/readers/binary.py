@@ -94,8 +94,25 @@ def not_text(name: str, what: str, data: bytes, nul: int) -> ModelError:
     if kind in ("xls", "xlsx"):
         return ModelError(f"{what}: {name!r} is an Excel workbook (.{kind}), not CSV text; allowed: CSV text (its "
                           "sheet saved as CSV)")
+    if utf16(data[:HEAD_BYTES]):
+        return ModelError(f"{what}: {name!r} is UTF-16 text (as a spreadsheet's 'Unicode Text' saves it), not "
+                          "UTF-8; allowed: CSV text in UTF-8 (save it as 'CSV UTF-8')")
     return ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
 
 
+def utf16(head: bytes) -> bool:
+    """Whether a file's first bytes are UTF-16 text: its byte-order mark, or (without one) a NUL byte at every other
+    position of text that is otherwise ASCII (its first 64 characters at most)."""
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return True
+    head = head[:128]
+    if len(head) < 4:
+        return False
+    for zeros, text in ((head[1::2], head[0::2]), (head[0::2], head[1::2])):
+        if not zeros.strip(b"\0") and all(32 <= b < 127 or b in (9, 10, 13) for b in text):
+            return True
+    return False
+
+
 __all__ = ["HEAD_BYTES", "LOGS", "XLSX_MAGIC", "XLS_MAGIC", "first_bytes", "kind_of", "log_refused", "not_text",
-           "refuse_log"]
+           "refuse_log", "utf16"]

@@ -257,6 +257,11 @@ def text_table(text: str, name: str, what: str, max_rows: int, first_line: int =
     if not len(frame):
         raise ModelError(f"{what}: {name!r} holds no header; allowed: a header line and rows")
     header = [str(h).strip() for h in frame.iloc[0].tolist()]
+    separated = next((sep for sep in (";", "\t") if len(header) == 1 and sep in header[0]), None)
+    if separated is not None:  # one cell holding the columns: another separator than the comma
+        said = "semicolons (as a spreadsheet in a decimal-comma locale saves CSV)" if separated == ";" else "tabs"
+        raise ModelError(f"{what}: {name!r}: its header is one cell of columns separated by {said}; allowed: "
+                         "comma-separated values (save it as CSV with commas and decimal points)")
     lower = [h.lower() for h in header]
     twice = next((h for h, low in zip(header, lower) if low and lower.count(low) > 1), None)
     if twice is not None:
