@@ -64,6 +64,19 @@ def _explained(toa: Path, still: dict, layout: np.ndarray, c: float, rows: slice
     return float(np.mean(np.abs(r[np.isfinite(r)]) <= 6.1 * SIGMA))
 
 
+def _replayed(toa: Path, receivers: Path, out: Path, capsys, said: str) -> tuple[dict, np.ndarray, list[str]]:
+    """``sblsim replay`` of a TOA file as a still tag (exit 0): its ``summary.json``, which rows are flagged
+    ``tag_moved`` (read from ``track.csv``) and the console's lines holding ``said``."""
+    from sblsim.orchestrator.cli import main
+
+    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
+                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if said in line]
+    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    moved = np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0
+    return json.loads((out / "summary.json").read_text()), moved, lines
+
+
 @pytest.mark.slow
 def test_still_tags_in_changing_water_are_not_flagged_and_their_sigma_is_honest(tmp_path):
     """20 still tags, the sound speed calibrated from their pings: at most 5 % of the rows flagged (none
@@ -166,18 +179,12 @@ def test_an_animal_on_a_canals_four_receivers_is_moving_though_its_few_fixes_sca
     more than 6.1 σ from the place, each ping's emission time their mean): ``moving``, every row flagged, one warning
     line. A still tag at the same place: ``still``, its place explaining every arrival."""
     from sblsim.models.tracking.still_tag import MIN_EXPLAINED
-    from sblsim.orchestrator.cli import main
 
     toa, receivers, _ = _record(tmp_path, 3, walk=2.0, receivers=4, layout=CANAL, tag=CANAL_TAG)
-    out = tmp_path / "walk"
-    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
-                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
-    said = [line for line in capsys.readouterr().err.splitlines() if "one place explains" in line]
-    summary = json.loads((out / "summary.json").read_text())
+    summary, moved, said = _replayed(toa, receivers, tmp_path / "walk", capsys, "one place explains")
     still = summary["motion"]["still"]
     assert still["verdict"] == "moving" and still["scattered"] and summary["motion"]["moved"], still
-    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
-    assert (np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0).all()
+    assert moved.all()
     assert len(said) == 1 and f"{100 * still['explained_share']:.0f} %" in said[0], said
     assert _explained(toa, still, CANAL, summary["sound_speed"]["sound_speed_m_s"]) < MIN_EXPLAINED
     toa, receivers, places = _record(tmp_path, 3, receivers=4, layout=CANAL, tag=CANAL_TAG)
@@ -215,19 +222,13 @@ def test_an_animal_whose_two_places_explain_too_few_arrivals_is_moving(tmp_path,
     :data:`~sblsim.models.tracking.still_tag.MIN_EXPLAINED`: ``moving``, every row flagged, the console saying two
     places explain too few."""
     from sblsim.models.tracking.still_tag import MIN_EXPLAINED
-    from sblsim.orchestrator.cli import main
 
     toa, receivers, _ = _record(tmp_path, 2, walk=2.0, receivers=4, layout=CANAL, tag=CANAL_TAG)
-    out = tmp_path / "walk"
-    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
-                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
-    said = [line for line in capsys.readouterr().err.splitlines() if "two places" in line]
-    summary = json.loads((out / "summary.json").read_text())
+    summary, moved, said = _replayed(toa, receivers, tmp_path / "walk", capsys, "two places")
     still = summary["motion"]["still"]
     assert still["verdict"] == "moving" and still["change"] is None and still["places_explaining"] == 2, still
     assert still["explained_share"] < MIN_EXPLAINED and still["scattered"], still
-    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
-    assert (np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0).all()
+    assert moved.all()
     assert len(said) == 1 and "the tag moved the whole time" in said[0], said
 
 
@@ -238,20 +239,13 @@ def test_a_still_tag_that_swims_off_is_moved_from_its_change_and_said_not_to_sta
     apart here: one speed, so the water's change counts too), and the console says it did not stay; its first place
     explains more than half of its own."""
     from sblsim.models.tracking.still_tag import MIN_EXPLAINED
-    from sblsim.orchestrator.cli import main
 
     toa, receivers, places = _record(tmp_path, 0, walk=2.0, walk_from=600)
-    out = tmp_path / "off"
-    assert main(["replay", str(toa), "--format", "toa", "--receivers", str(receivers), "--motion", "stationary",
-                 "--toa-sigma", str(SIGMA), "--out", str(out)]) == 0
-    said = [line for line in capsys.readouterr().err.splitlines() if "did not stay there" in line]
-    summary = json.loads((out / "summary.json").read_text())
+    summary, moved, said = _replayed(toa, receivers, tmp_path / "off", capsys, "did not stay there")
     still, c = summary["motion"]["still"], summary["sound_speed"]["sound_speed_m_s"]
     change = still["change"]
     assert still["verdict"] == "moved" and still["places_explaining"] == 2, still
     assert abs(change["split_ping"] - 600) <= 3, change
-    rows = np.genfromtxt(out / "track.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
-    moved = np.char.find(rows["quality_reason"].astype(str), "tag_moved") >= 0
     assert not moved[:change["split_ping"]].any() and moved[change["split_ping"]:].all()
     split = slice(change["split_ping"], None)
     assert change["second_place_explained_share"] < MIN_EXPLAINED
