@@ -3,13 +3,14 @@ receivers, deployments, tag sheets and sound-speed series shares.
 
 A file must be a regular file (a FIFO or a device is refused before it is opened), is read to at most a stated
 number of bytes and rows (counted in what was read), must be UTF-8 text (a byte-order mark is dropped) without a NUL
-byte, and is refused before pandas builds a cell where a line is longer than 1 MiB or holds more than
-:data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS` cells, or the table more than a stated number of cells in all
-(:func:`~sblsim.orchestrator.io.tables.check_cells`: its rows times its first row's cells, as pandas pads a short
-row); it is then parsed by pandas into text cells (from the text's UTF-8 bytes a piece at a time, not a copy of it
-whole), every one of which the reader then checks itself (its pattern, finite, within its range); no name or text in
-a file is ever taken as a path. Every error is one line naming the file, its line and column and the allowed range
-(:class:`ModelError`).
+byte (a spreadsheet's UTF-16 named as such), not cut short (:func:`cut_short`), and is refused before pandas builds
+a cell where a line is longer than 1 MiB or holds more than :data:`~sblsim.orchestrator.io.tables.MAX_LINE_CELLS`
+cells, or the table more than a stated number of cells in all (:func:`~sblsim.orchestrator.io.tables.check_cells`:
+its rows times its first row's cells, as pandas pads a short row); it is then parsed by pandas into text cells (from
+the text's UTF-8 bytes a piece at a time, not a copy of it whole; a header of one cell of columns separated by
+semicolons or tabs named as such), every one of which the reader then checks itself (its pattern, finite, within its
+range); no name or text in a file is ever taken as a path. Every error is one line naming the file, its line and
+column and the allowed range (:class:`ModelError`).
 """
 
 from __future__ import annotations

@@ -197,9 +197,10 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     Raises
     ------
     ModelError
-        One line naming the file, its line and column and the allowed range: a file too large, a cell outside
-        its pattern or range, a missing column, a receiver whose rows are not in its logging order (more than
-        :data:`MAX_CLOCK_RESETS` back-steps, or parts that share no tag).
+        One line naming the file, its line and column and the allowed range: a file too large or cut short
+        (:func:`~sblsim.orchestrator.readers.cells.cut_short`), a cell outside its pattern or range, a missing
+        column, a receiver whose rows are not in its logging order (more than :data:`MAX_CLOCK_RESETS` back-steps,
+        or parts that share no tag).
     """
     if format is not None and format not in FORMATS:
         raise ModelError(f"format: {format!r} is not one of {', '.join(FORMATS)}")

@@ -250,7 +250,9 @@ def ingest(path: Path | str, out: Path | str, format: str | None = None, *, piec
     ------
     ModelError
         One line: every refusal of :func:`~sblsim.orchestrator.readers.detections.read_detections` but its row and
-        size limits (naming the file's line and column), a disk without the file's size free, a disk that fills.
+        size limits (naming the file's line and column; a file cut short before anything is written:
+        :func:`~sblsim.orchestrator.readers.cells.cut_short`), a disk without the file's size free, a disk that
+        fills.
     """
     started = clock.perf_counter()
     arrow_pool(decay=False)  # (its memory is its piece's: jemalloc's pages kept a second, 12 % faster)
