@@ -99,8 +99,9 @@ def cut_short(text: str, name: str, what: str, by_record: bool = False, whole: b
     """Refuse a CSV text cut short (an export, a download or a copy interrupted): it ends without a line break and
     its last record holds fewer cells than the record before it (Python's :mod:`csv` reads the records, a quoted cell
     across lines one record; ``by_record``: than the last record before it whose first cell is the same, a Fathom
-    CSV's record type). A text that ends in a line break, or whose last record holds as many cells, passes (a file cut
-    at a line's end, or inside a line's last cell, cannot be told from a whole one).
+    CSV's record type, or, a record of one cell (cut inside its type), than the one before it). A text that ends in
+    a line break, or whose last record holds as many cells, passes (a file cut at a line's end, or inside a line's
+    last cell, cannot be told from a whole one).
 
     Parameters
     ----------
@@ -130,14 +131,13 @@ def cut_short(text: str, name: str, what: str, by_record: bool = False, whole: b
     if len(records) < 2:
         return
     last = records[-1]
-    for before in reversed(records[:-1]):
-        if by_record and before[:1] != last[:1]:
-            continue
-        if len(last) < len(before):
-            raise ModelError(f"{what}: {name!r}: its last line ends without a line break and holds {len(last)} cells "
-                             f"where the line before holds {len(before)}: the file is cut short (an export, download "
-                             "or copy interrupted); allowed: whole lines (export it again, or delete the cut line)")
-        return
+    # by record type: the last record before it of its type, else (a cut inside its first cell) any record before it
+    before = next((r for r in reversed(records[:-1]) if not by_record or r[:1] == last[:1]),
+                  records[-2] if len(last) == 1 else last)
+    if len(last) < len(before):
+        raise ModelError(f"{what}: {name!r}: its last line ends without a line break and holds {len(last)} cells "
+                         f"where the line before holds {len(before)}: the file is cut short (an export, download or "
+                         "copy interrupted); allowed: whole lines (export it again, or delete the cut line)")
 
 
 def tail_text(path: Path, size: int = TAIL_CHARS) -> tuple[str, bool]:

@@ -69,7 +69,8 @@ def test_a_store_of_a_cut_file_is_refused_before_anything_is_written(tmp_path):
 
 def test_fathoms_records_are_compared_with_their_own_type():
     """A Fathom CSV ending in a whole TEMP record (9 cells) after DET records (21), without a line break: read; a DET
-    record cut after a TEMP record: refused (compared with the last DET record, not the TEMP one)."""
+    record cut after a TEMP record: refused (compared with the last DET record, not the TEMP one); one cut inside its
+    record type (``DE``, a type no record before has): refused against the record before it."""
     text = fathom_text(_detections(3))
     temp = "TEMP,2023-11-14 22:13:20,2023-11-14 22:13:20,+0,0,VR2W,461001,9.5,10.0"
     cut_short(text + temp, "f.csv", "detections", by_record=True)  # no refusal
@@ -79,6 +80,8 @@ def test_fathoms_records_are_compared_with_their_own_type():
         cut_short(text + temp + "\n" + det, "f.csv", "detections", by_record=True)
     with pytest.raises(ModelError, match="holds 9 cells where the line before holds 21"):
         cut_short(text + temp, "f.csv", "detections", by_record=False)  # (a plain table's rule would refuse it)
+    with pytest.raises(ModelError, match="holds 1 cells where the line before holds 9"):  # cut inside its type
+        cut_short(text + temp + "\nDE", "f.csv", "detections", by_record=True)
 
 
 def test_a_header_wider_than_its_rows_or_a_note_across_lines_is_not_taken_for_a_cut():
