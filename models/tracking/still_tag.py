@@ -24,15 +24,16 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 #: (the verdict ``unchecked``), not called still.
 UNCHECKED_BELOW = 2 * sv.MIN_SEGMENT
 #: The least share of its arrivals a still tag's one place explains (each within the robust fit's kept residual at the
-#: timing noise taken: :func:`explained_share`; its still part's, where its fixes say it moved). Where fewer, the tag is
+#: timing noise taken: :func:`explained_share`; its two places', where its fixes say it moved once: the still part's
+#: and where it went, each share weighed by its part's arrivals). Where fewer, the tag is
 #: neither still nor moved once: ``moving`` where its fixes say it moved or lie in an order in time its error terms do
 #: not make (:func:`~sblsim.models.tracking.still.wanders`), else ``unchecked`` (it moved where its few trusted fixes
 #: cannot tell it from their errors, or its timing noise is several times the one taken). A still tag's place explains
 #: all its arrivals but its reflections (0.84 to 1.0 on the boats' reference and sync tags, at least 0.91 where a
-#: receiver hears a reflection 30 % of the time), a tag moved once half way 0.79 over its record and all before its
-#: move, a random walk of 2 m a ping on a bent canal's four receivers 0.36 to 0.49 (0.42 to 0.51 before a change its
-#: fixes found); a still tag whose timing noise is 7 times the stated 0.65, 10 times 0.53 to 0.55, 15 times 0.42 to
-#: 0.44.
+#: receiver hears a reflection 30 % of the time), a tag moved once half way 0.79 over its record and its two places
+#: all of it, a random walk of 2 m a ping on a bent canal's four receivers 0.36 to 0.49 (0.42 to 0.51 its still part's
+#: place, before a change its fixes found; its two places 0.42); a still tag whose timing noise is 7 times the stated
+#: 0.65, 10 times 0.53 to 0.55, 15 times 0.42 to 0.44.
 MIN_EXPLAINED = 0.5
 
 
@@ -287,10 +288,10 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     split (the pings between its last still trusted fix and its first moved one given to the place their arrivals
     fit: :func:`split_ping`), those flagged; one that moved the whole time keeps one place, every row flagged (an
     animal). One whose place explains fewer than :data:`MIN_EXPLAINED` of its arrivals (:func:`explained_share`; its
-    still part's place, where it moved) is not called still: it moved the whole time where its fixes say it moved or lie
-    in an order its error terms do not make (an animal whose few trusted fixes scatter far beyond their covariance),
-    else ``unchecked``. With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it moved:
-    ``unchecked`` (its rows are flagged by the caller), not still.
+    two places, where it moved once) is not called still or moved: it moved the whole time where its fixes say it
+    moved or lie in an order its error terms do not make (an animal whose few trusted fixes scatter far beyond their
+    covariance), else ``unchecked``. With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it
+    moved: ``unchecked`` (its rows are flagged by the caller), not still.
 
     Parameters
     ----------
