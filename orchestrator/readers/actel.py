@@ -32,16 +32,16 @@ from sblsim.orchestrator.io.times import iso_utc, utc_seconds
 from sblsim.orchestrator.readers import thelma
 from sblsim.orchestrator.readers.cells import (
     column,
+    file_table,
     named,
     numbers,
     pattern,
-    read_text,
     refuse,
     shown_header,
     text_table,
 )
 from sblsim.orchestrator.readers.deployments import ALIASES, MAX_DEPLOYMENTS, Deployments, read_deployments
-from sblsim.orchestrator.readers.limits import MAX_COORDINATE, MAX_DETECTION_BYTES
+from sblsim.orchestrator.readers.limits import MAX_COORDINATE
 from sblsim.orchestrator.readers.local_times import local_seconds
 from sblsim.orchestrator.readers.network import RECEIVER
 from sblsim.orchestrator.readers.sensors import sensor_columns
@@ -127,11 +127,6 @@ def actel(header: list[str], body: pd.DataFrame, lines: list[int], name: str, wh
     return frame, {k for k in index.values() if k is not None}
 
 
-def _table(path: Path, what: str, rows: int) -> tuple[list[str], pd.DataFrame, list[int]]:
-    """A workspace file's header, rows and lines (bounded, every cell text)."""
-    return text_table(read_text(path, what, MAX_DETECTION_BYTES, rows), str(path), what, rows)
-
-
 def _stations(path: Path) -> tuple[pd.DataFrame, list[str], list[str]]:
     """``spatial.csv``'s stations: a table by station name (``kind``, its ``line``, each position column's text)
     and the position columns (header names as sblsim's deployments read them) with their names in the file.
@@ -142,7 +137,7 @@ def _stations(path: Path) -> tuple[pd.DataFrame, list[str], list[str]]:
         No ``Station.name`` or no positions, a station named twice, a ``Type`` neither Hydrophone nor Release.
     """
     what, name = "stations", str(path)
-    header, body, lines = _table(path, what, MAX_DEPLOYMENTS)
+    header, body, lines = file_table(path, what, MAX_DEPLOYMENTS)
     index = {key: named(header, ALIASES[key]) for key in ("lat", "lon", "x", "y")}
     station, kind = named(header, ("station_name",)), named(header, ("type",))
     axes = ["lat", "lon"] if index["lat"] is not None and index["lon"] is not None else \
@@ -199,7 +194,7 @@ def read_actel_deployments(path: Path | str, spatial: Path | str | None, tz: str
     """
     path, what = Path(path), "receivers"
     name = str(path)
-    header, body, lines = _table(path, what, MAX_DEPLOYMENTS)
+    header, body, lines = file_table(path, what, MAX_DEPLOYMENTS)
     index = {key: named(header, (key,)) for key in DEPLOYMENT_FINGERPRINT}
     missing = [h for h, key in zip(("Receiver", "Station.name", "Start", "Stop"), DEPLOYMENT_FINGERPRINT)
                if index[key] is None]
@@ -321,7 +316,7 @@ def read_biometrics(path: Path | str, tz: str | None) -> Biometrics:
     """
     path, what = Path(path), "tags"
     name = str(path)
-    header, body, lines = _table(path, what, MAX_TAGS)
+    header, body, lines = file_table(path, what, MAX_TAGS)
     index = {key: named(header, (key,)) for key in ("signal", "code_space", "release_date", "release_site",
                                                      "serial_nr", "group")}
     if index["signal"] is None:

@@ -27,6 +27,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io import tables
 from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, read_bounded
 from sblsim.orchestrator.readers.binary import not_text, refuse_log
+from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
 
 #: The options every table is parsed with (each cell a str, none taken as missing; blank lines kept as rows).
 _CSV = dict(header=None, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, engine="c",
@@ -274,6 +275,23 @@ def text_table(text: str, name: str, what: str, max_rows: int, first_line: int =
     return header, body, lines[1:].tolist()
 
 
+def file_table(path: Path | str, what: str, max_rows: int, max_bytes: int = MAX_DETECTION_BYTES, *,
+               fallback: str | None = None) -> tuple[list[str], pd.DataFrame, list[int]]:
+    """A CSV file's header (stripped) and its rows as text cells, with each row's line in the file (1: the header);
+    blank lines skipped: :func:`read_text` (at most ``max_bytes`` bytes and ``max_rows`` rows; ``fallback`` its
+    encoding where not UTF-8), :func:`cut_short` and :func:`text_table`.
+
+    Raises
+    ------
+    ModelError
+        One line: each of theirs.
+    """
+    path = Path(path)
+    text = read_text(path, what, max_bytes, max_rows, fallback=fallback)
+    cut_short(text, str(path), what)
+    return text_table(text, str(path), what, max_rows)
+
+
 def refuse(what: str, name: str, line: int, column: str, text: str, allowed: str) -> ModelError:
     shown = text if len(text) <= 40 else text[:40] + "..."
     return ModelError(f"{what}: {name!r} line {line} column {column}: {shown!r} is not allowed; allowed: {allowed}")
@@ -408,6 +426,6 @@ def shown_header(header: list[str]) -> str:
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "named", "normal_name", "numbers", "pattern",
-           "per_value", "read_text", "refuse", "shown_header", "tail_text", "text_table", "too_large", "trimmed",
-           "units_row"]
+__all__ = ["TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "file_table", "named", "normal_name", "numbers",
+           "pattern", "per_value", "read_text", "refuse", "shown_header", "tail_text", "text_table", "too_large",
+           "trimmed", "units_row"]

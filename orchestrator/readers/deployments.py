@@ -55,16 +55,14 @@ from sblsim.orchestrator.io.frames import (
 )
 from sblsim.orchestrator.io.times import iso_utc, utc_seconds
 from sblsim.orchestrator.readers.cells import (
-    cut_short,
+    file_table,
     named,
     numbers,
     pattern,
-    read_text,
     shown_header,
-    text_table,
     units_row,
 )
-from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_DETECTION_BYTES
+from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
 
 #: The most deployments a table holds.
@@ -258,10 +256,7 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     path, what = Path(path), "receivers"
     name = str(path)
     if rows is None:
-        text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DEPLOYMENTS)
-        cut_short(text, name, what)
-        header, body, lines = text_table(text, name, what, MAX_DEPLOYMENTS)  # a row's line: where it starts
-        del text
+        header, body, lines = file_table(path, what, MAX_DEPLOYMENTS)  # a row's line: where it starts
     else:
         header, body, lines = rows
     index = _index(header)

@@ -11,16 +11,8 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.readers.cells import column, numbers, pattern, read_text, text_table
-from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_DETECTION_BYTES, MAX_HYDROPHONES
-
-
-def table(path: Path, what: str, max_rows: int) -> tuple[list[str], pd.DataFrame, list[int]]:
-    """A CSV file's header (stripped) and its rows as text cells, with each row's line in the file (1: the header);
-    blank lines skipped: :func:`~sblsim.orchestrator.readers.cells.read_text` (at most :data:`MAX_DETECTION_BYTES` bytes
-    and ``max_rows`` rows) and :func:`~sblsim.orchestrator.readers.cells.text_table`."""
-    return text_table(read_text(path, what, MAX_DETECTION_BYTES, max_rows), str(path), what, max_rows)
-
+from sblsim.orchestrator.readers.cells import column, file_table, numbers, pattern
+from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_HYDROPHONES
 
 
 def read_hydrophones(path: Path | str) -> pd.DataFrame:
@@ -41,7 +33,7 @@ def read_hydrophones(path: Path | str) -> pd.DataFrame:
     """
     path, what = Path(path), "receivers"
     name = str(path)
-    header, body, lines = table(path, what, MAX_HYDROPHONES)
+    header, body, lines = file_table(path, what, MAX_HYDROPHONES)
     if not len(body):
         raise ModelError(f"{what}: {name!r} holds a header and no receivers")
     serial = column(header, ("serial", "receiver", "name"))
@@ -73,4 +65,4 @@ def read_hydrophones(path: Path | str) -> pd.DataFrame:
     return frame
 
 
-__all__ = ["read_hydrophones", "table"]
+__all__ = ["read_hydrophones"]

@@ -8,8 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.readers.cells import column, numbers
-from sblsim.orchestrator.readers.hydrophones import table
+from sblsim.orchestrator.readers.cells import column, file_table, numbers
 from sblsim.orchestrator.readers.limits import MAX_EPOCH, MAX_SERIES, SOUND_SPEED_RANGE
 
 
@@ -29,7 +28,7 @@ def read_sound_speed(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     """
     path, what = Path(path), "sound speed"
     name = str(path)
-    header, body, lines = table(path, what, MAX_SERIES)
+    header, body, lines = file_table(path, what, MAX_SERIES)
     t, c = column(header, ("epo", "time", "time_s")), column(header, ("sound_speed_m_s", "ss", "sound_speed"))
     if t is None or c is None:
         raise ModelError(f"{what}: {name!r}: the header needs epo (or time) and sound_speed_m_s (or ss) columns; got "

@@ -45,17 +45,14 @@ from sblsim.orchestrator.readers.binary import LOGS, first_bytes, kind_of, log_r
 from sblsim.orchestrator.readers.burst_sequence import BURST_RANGE, read_burst_sequence
 from sblsim.orchestrator.readers.cells import (
     UNITS,
-    cut_short,
+    file_table,
     named,
     numbers,
     pattern,
-    read_text,
     refuse,
     shown_header,
-    text_table,
 )
 from sblsim.orchestrator.readers.deployments import DEPTH_RANGE, _blank
-from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
 from sblsim.orchestrator.readers.otn_tags import otn_table, releases
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
 from sblsim.orchestrator.readers.workbook import located, read_workbook
@@ -225,10 +222,7 @@ def read_tag_sheet(path: Path | str) -> TagSheet:
         table = read_workbook(path, kind, what, ALIASES["transmitter"], MAX_TAGS)
         with located(name, table.sheet):
             return tag_table(table.header, table.body, table.lines, path, what, table.index)
-    text = read_text(path, what, MAX_DETECTION_BYTES, MAX_TAGS)
-    cut_short(text, name, what)
-    header, body, lines = text_table(text, name, what, MAX_TAGS)
-    del text
+    header, body, lines = file_table(path, what, MAX_TAGS)
     index = None
     if otn_table(header) is not None:
         body, lines, index = releases(header, body, lines, name, what)

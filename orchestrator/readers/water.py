@@ -28,7 +28,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.sound_speed import TEMPERATURE_RANGE
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import named, numbers, read_text, shown_header, text_table
+from sblsim.orchestrator.readers.cells import file_table, named, numbers, read_text, shown_header
 from sblsim.orchestrator.readers.input_rows import MAX_TIME
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES, MAX_DETECTION_CELLS, MAX_DETECTIONS
 from sblsim.orchestrator.readers.receiver_temperature import FALLBACK_ENCODING, receiver_kind, receiver_temperatures
@@ -86,8 +86,8 @@ def read_temperature_series(path: Path | str, origin: float | None = None, absol
             raise ModelError(f"{what}: {name!r}: the receivers' records are in UTC and the times of arrival have no "
                              "stated origin; allowed: --time-origin (the UTC time of the TOA file's zero)")
         return np.column_stack([series[:, 0] - origin, series[:, 1]])
-    text = read_text(path, what, MAX_TEMPERATURE_BYTES, MAX_TEMPERATURE_ROWS, fallback=FALLBACK_ENCODING)
-    header, body, lines = text_table(text, name, what, MAX_TEMPERATURE_ROWS)
+    header, body, lines = file_table(path, what, MAX_TEMPERATURE_ROWS, MAX_TEMPERATURE_BYTES,
+                                     fallback=FALLBACK_ENCODING)
     t = named(header, ABSOLUTE_NAMES + RELATIVE_TIME_NAMES)
     c = named(header, TEMPERATURE_NAMES)
     if t is None or c is None:

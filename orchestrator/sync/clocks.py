@@ -34,9 +34,9 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.paths import inside
+from sblsim.orchestrator.readers.cells import file_table
 from sblsim.orchestrator.readers.cells import numbers as _numbers
 from sblsim.orchestrator.readers.cells import pattern as _pattern
-from sblsim.orchestrator.readers.hydrophones import table as _table
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_EPOCH
 from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 
@@ -317,7 +317,7 @@ def _columns(path: Path, what: str, needed: tuple[str, ...], source: str, option
         One line naming the columns needed and ``source`` (what writes the table), where one is missing or there
         are no rows.
     """
-    header, body, lines = _table(path, what, MAX_OFFSET_ROWS)
+    header, body, lines = file_table(path, what, MAX_OFFSET_ROWS)
     name = str(path)
     lower = [h.lower() for h in header]
     missing = [c for c in needed if c not in lower]

@@ -106,3 +106,22 @@ def test_the_boats_deployments_and_tag_sheet_cut_are_refused(tmp_path, name, int
     with pytest.raises(ModelError) as refused:
         read(path)
     assert "cut short" in str(refused.value) and "\n" not in str(refused.value), refused.value
+
+
+def test_every_table_read_whole_refuses_a_cut(tmp_path):
+    """The readers of a table read whole share one reading (``file_table``): a receivers table in x/y
+    (``read_hydrophones``) and actel's biometrics cut a cell short are refused as the deployments are."""
+    from sblsim.orchestrator.readers.actel import read_biometrics
+    from sblsim.orchestrator.readers.hydrophones import read_hydrophones
+
+    receivers = tmp_path / "receivers.csv"
+    receivers.write_text("name,x_m,y_m\nH1,0,0\nH2,100,0\nH3,0")
+    with pytest.raises(ModelError, match="holds 2 cells where the line before holds 3"):
+        read_hydrophones(receivers)
+    receivers.write_text("name,x_m,y_m\nH1,0,0\nH2,100,0\nH3,0,100")
+    assert len(read_hydrophones(receivers)) == 3
+    biometrics = tmp_path / "biometrics.csv"
+    biometrics.write_text('"Release.date","Release.site","Signal","Code.space"\n'
+                          '"2021-03-22 08:00:00","Pier",610,"R64K"\n"2021-03-22 08:05","Pier",611')
+    with pytest.raises(ModelError, match="cut short"):
+        read_biometrics(biometrics, "Europe/Copenhagen")
