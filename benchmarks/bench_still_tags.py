@@ -9,7 +9,9 @@ A tag at a fixed place among 8 receivers (1 km × 0.8 km), a ping every 120 ± 2
 the pings): for ``--seeds`` still tags, the share of rows flagged and the mean 2-D NEES of the place against the
 truth with the covariance reported; the same tags' fixes under the permutation test of their order alone (the verdict
 before: :func:`sblsim.models.tracking.stationary.moved`); a tag moved 20 m at its 360th ping, where its rows are
-flagged ``tag_moved`` from (None where none is); a random walk of 2 m per ping (an animal); the share of its
+flagged ``tag_moved`` from (None where none is); one drifting off from its 360th ping at 1, 0.2 and 0.05 m a ping
+(:data:`DRIFTS`, a dead fish in a current), the same (and the largest error of a row left ``ok``); a random walk of
+2 m per ping (an animal); the share of its
 arrivals each one's place explains (``explained_share``: the still tags', the moved tags' two places' and their second
 places', the walks'; their least, median and largest); and the verdict's own time on 10⁴ fixes, still and moved
 (best of three). Prints a JSON line last.
@@ -41,6 +43,8 @@ TAG = np.array([780.0, 560.0])
 CANAL_TAG = np.array([503.0, 180.0])
 SIGMA = 1e-4
 PINGS = 720
+#: The drifts' speeds [m a ping] (a dead fish carried off by a current, from the middle ping to the end).
+DRIFTS = (1.0, 0.2, 0.05)
 SITES = ("open", "canal")
 
 
@@ -96,7 +100,7 @@ def _reflected(rng: np.random.Generator, t: np.ndarray, share: float) -> tuple[n
 
 
 def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float | None = None,
-           how: Record = Record()):
+           how: Record = Record(), drift: float | None = None):
     """A simulated record's TOA and receivers files in ``folder``, and the tag's place at each ping (module
     docstring)."""
     from sblsim.orchestrator.tracks.variants import write_toa
@@ -111,6 +115,9 @@ def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float 
         places[n // 2:] += move
     if walk is not None:
         places = places + np.cumsum(rng.normal(scale=walk, size=(n, 2)), axis=0)
+    if drift is not None:  # along the move's direction, the middle ping the first moved
+        way = how.layout()[2] / np.linalg.norm(how.layout()[2])
+        places[n // 2:] += drift * np.arange(1, n - n // 2 + 1)[:, None] * way
     path = np.linalg.norm(places[:, None] - receivers[None], axis=2)
     on, excess = _reflected(np.random.default_rng([seed, 1]), t, how.reflection)  # (its own draws: the rest alike)
     path[:, 1] += np.where(on, excess, 0.0)
@@ -122,6 +129,21 @@ def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float 
     rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(names, receivers))
     (folder / "receivers.csv").write_text("name,x_m,y_m\n" + rows + "\n")
     return folder / "toa.txt", folder / "receivers.csv", places
+
+
+def pings(outcome, seed: int, how: Record = Record()) -> np.ndarray:
+    """Each row of a tracked record's track: its ping (the record's emission nearest the row's time; a ping heard by
+    too few receivers has no row)."""
+    t = np.cumsum(np.random.default_rng(seed).uniform(*how.interval, how.pings))  # record's first draws
+    time = outcome.track["time"].to_numpy(float)
+    after = np.clip(np.searchsorted(t, time), 1, len(t) - 1)
+    return np.where(np.abs(t[after] - time) < np.abs(t[after - 1] - time), after, after - 1)
+
+
+def first_flagged(outcome, seed: int, how: Record = Record()) -> int | None:
+    """The first ping flagged ``tag_moved`` from the middle ping [pings] (None where none is)."""
+    reasons = outcome.track["quality_reason"].str.contains("tag_moved").to_numpy()
+    return int(pings(outcome, seed, how)[np.argmax(reasons)]) - how.pings // 2 if reasons.any() else None
 
 
 def tracked(folder: Path, seed: int, **kw):
@@ -173,7 +195,7 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             outcome, places, _ = tracked(folder, seed, move=how.layout()[2], how=how)
             reasons = outcome.track["quality_reason"].str.contains("tag_moved").to_numpy()
             first = int(np.argmax(reasons)) if reasons.any() else len(reasons)
-            offsets.append(first - how.pings // 2 if reasons.any() else None)  # None: no row flagged tag_moved
+            offsets.append(first_flagged(outcome, seed, how))
             before_ok.append(bool((outcome.track["quality"].to_numpy()[:first] == "ok").all()))
             change = outcome.summary["motion"]["still"]["change"]  # None: the move not found (NaN)
             shares["moved"].append(outcome.summary["motion"]["still"]["explained_share"])  # its two places'
@@ -181,6 +203,16 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             shares["second"].append(float("nan") if second is None else second)
             distance.append(float(np.linalg.norm(np.asarray(change["second_place"]) - places[-1])) if change
                             else float("nan"))
+        drifts = {}
+        for speed in DRIFTS:
+            drifts[speed] = {"offsets": [], "ok_error_m": [], "verdicts": []}
+            for seed in range(5):
+                outcome, places, _ = tracked(folder, seed, drift=speed, how=how)
+                drifts[speed]["offsets"].append(first_flagged(outcome, seed, how))
+                ok = (outcome.track["quality"] == "ok").to_numpy()
+                off = np.hypot(*(outcome.track[["x", "y"]].to_numpy() - places[pings(outcome, seed, how)]).T)
+                drifts[speed]["ok_error_m"].append(float(off[ok].max()) if ok.any() else None)
+                drifts[speed]["verdicts"].append(outcome.summary["motion"]["still"]["verdict"])
         animals = []
         for seed in range(5):
             still = tracked(folder, seed, walk=2.0, how=how)[0].summary["motion"]["still"]
@@ -190,7 +222,7 @@ def measure(seeds: int, how: Record = Record()) -> dict:
             "nees_mean": float(np.mean(nees)), "nees_median": float(np.median(nees)),
             "order_test_moved": order_moved, "track_s_median": float(np.median(seconds)),
             "moved_first_flag_offsets": offsets, "moved_rows_before_ok": before_ok,
-            "moved_second_place_error_m": distance, "animal_verdicts": animals,
+            "moved_second_place_error_m": distance, "drifts": drifts, "animal_verdicts": animals,
             "explained_share": {kind: [float(np.nanmin(v)), float(np.nanmedian(v)), float(np.nanmax(v))]
                                 for kind, v in shares.items() if np.isfinite(v).any()},
             "verdict_1e4_still_s": verdict_time(0.0), "verdict_1e4_moved_s": verdict_time(20.0)}
@@ -232,6 +264,10 @@ def main() -> None:
           " "
           f"the rows before ok {r['moved_rows_before_ok']}, the second place {second} m from where it went; a random "
           f"walk of 2 m per ping: {r['animal_verdicts']}")
+    for speed, d in r["drifts"].items():
+        largest = [None if e is None else round(e, 2) for e in d["ok_error_m"]]
+        print(f"drifting off at {speed:g} m per ping from ping {how.pings // 2}: first flagged row {d['offsets']} "
+              f"pings from the onset, the largest error of a row ok {largest} m; {d['verdicts']}")
     said = "; ".join(f"{kind} {low:.3f} to {high:.3f} (median {mid:.3f})"
                      for kind, (low, mid, high) in r["explained_share"].items())
     print(f"the share of its arrivals each place explains (the moved tags' two places', their second places'): "

@@ -32,6 +32,15 @@ cumulative sums: O(N q²) for N fixes and q columns. The tag moved where the lar
 its change is that τ, and the segment before it is scanned again (binary segmentation: Vostrikova, Soviet Math.
 Dokl. 24, 1981) until none is found: the **first** change. Its rows from there on are the ones that moved.
 
+A tag that drifts off (a dead fish carried by a current) moves the fixes' mean slowly, and a step is found only where
+that mean has moved by what one fix sees, after the drift's onset. The same statistic with a ramp's columns
+``h_k = (t_k − t_τ−1) I`` from τ on (a constant velocity ``δ`` [m/s]; Λ again χ²(2) for one τ) fits the change's
+segment with a drift to its end, or one that stops at the step (the step itself its latest onset); where a drift
+explains the fixes better than the step by more than χ²(2) at :data:`STEP_LEVEL`, its onset is the change. Where no
+step is one a single fix sees, a drift to the record's end past the same threshold whose way by then a single fix
+sees is the change (:func:`drift_onset`, :func:`still_verdict`). The ramp's sums are the step's reverse cumulative
+sums weighted by ``t_k`` and ``t_k²``, less ``t_τ−1`` times the lower ones: the same O(N q²).
+
 The dispersion ``s²`` is the fixes' own, from successive differences (they cancel ``μ``, ``n(t)`` and a step but at
 one pair): the median of ``dᵀ (R_k + R_k−1)⁻¹ d`` over χ²(2)'s median ``2 ln 2`` (a robust von Neumann estimate,
 von Neumann, Ann. Math. Stat. 12(4), 1941). A fix far from its neighbours (a reflection the fix kept) is pulled to
@@ -91,7 +100,8 @@ class StillVerdict:
     :func:`wanders`). ``detectable`` (2,) [m]: the smallest step a single fix could see, in the best and the worst
     direction (the square roots of χ²(2) at :data:`STEP_LEVEL` times the eigenvalues of a fix's own and slow
     covariance; NaN where undecided): a smaller move is not told from the fixes' scatter. With no ``change``,
-    ``throughout`` is the order test asked for (``order_test``)."""
+    ``throughout`` is the order test asked for (``order_test``). ``drifted``: the change is a drift's onset
+    (:func:`drift_onset`), not a step's."""
 
     fixes: int
     white_scale: float
@@ -101,6 +111,7 @@ class StillVerdict:
     change: int | None
     throughout: bool = False
     detectable: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    drifted: bool = False
 
 
 def white_scale(x: np.ndarray, R: np.ndarray) -> float:
@@ -159,8 +170,12 @@ def _root(C: np.ndarray) -> np.ndarray:
     return vecs * np.sqrt(np.clip(vals, 0.0, None))[..., None, :]
 
 
-def step_statistics(x: np.ndarray, R: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """The step statistic Λ(τ) (module docstring) of every τ in [1, N): a step from fix τ on.
+def step_statistics(x: np.ndarray, R: np.ndarray, G: np.ndarray,
+                    ramp: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The step statistic Λ(τ) (module docstring) of every τ in [1, N): a step from fix τ on, or, with ``ramp``, a
+    drift from fix τ − 1 on (the change's columns ``h_k = (r_k − r_τ−1) I`` for k ≥ τ, 0 before: a fix moving by
+    ``δ`` per unit of ``r``; ``r = t`` a drift at a constant velocity to the end, ``r = min(t, t_j)`` one that stops
+    at fix j).
 
     Parameters
     ----------
@@ -170,13 +185,16 @@ def step_statistics(x: np.ndarray, R: np.ndarray, G: np.ndarray) -> np.ndarray:
         The fixes' white covariances [m²].
     G : ndarray, (q, 2, N)
         The slow errors' columns [m] (:func:`slow_columns`).
+    ramp : ndarray, (N,), optional
+        r, non-decreasing (the fixes' times, scaled to about 1 against rounding).
 
     Returns
     -------
     statistics : ndarray, (N,)
         Λ(τ); NaN at τ = 0.
     steps : ndarray, (N, 2)
-        Each τ's step ``δ = A⁻¹ b`` [m] (its generalised least-squares estimate); NaN at τ = 0.
+        Each τ's ``δ = A⁻¹ b`` [m] (its generalised least-squares estimate; with ``ramp``, per unit of r); NaN at
+        τ = 0.
     """
     n, q = len(x), G.shape[0]
     Ri = np.linalg.inv(R)
@@ -193,12 +211,23 @@ def step_statistics(x: np.ndarray, R: np.ndarray, G: np.ndarray) -> np.ndarray:
         return a.sum(axis=axis, keepdims=True) - np.cumsum(a, axis=axis) + a
 
     a, Rc, Z = tail(u, 0), tail(Ri, 0), tail(P, 2)  # Z_τ = L⁻¹ E_τᵀ, E_τ = Σ_k≥τ R_k⁻¹ G_k
+    a0, Z1, C = a[0], Z[:, :, 0], Rc[0] - np.einsum("ja,jb->ab", Z[:, :, 0], Z[:, :, 0])  # 1ᵀ Σ⁻¹ x; C = 1ᵀ Σ⁻¹ 1
+    Rh = Rh2 = Rc  # Σ_k≥τ h_k R_k⁻¹ and Σ_k≥τ h_k² R_k⁻¹ (h_k = 1: the step)
+    if ramp is not None:  # h_k = r_k − s, s = r_τ−1: the sums of r_k v_k and r_k² v_k less s times the lower ones
+        r = np.asarray(ramp, float)
+        s = np.concatenate([[np.nan], r[:-1]])
+        rRi = tail(r[:, None, None] * Ri, 0)
+        a = tail(r[:, None] * u, 0) - s[:, None] * a
+        Z = tail(r * P, 2) - s * Z
+        Rh2 = tail(r[:, None, None] ** 2 * Ri, 0) - 2 * s[:, None, None] * rRi + s[:, None, None] ** 2 * Rc
+        Rh = rRi - s[:, None, None] * Rc
     ZZ = np.stack([np.stack([(Z[:, i] * Z[:, j]).sum(axis=0) for j in range(2)], axis=-1) for i in range(2)], axis=1)
-    D = Rc - ZZ  # hᵀ Σ⁻¹ h
-    B = Rc - np.einsum("jak,jb->kab", Z, Z[:, :, 0])  # hᵀ Σ⁻¹ 1
-    C = B[0]  # 1ᵀ Σ⁻¹ 1
+    D = Rh2 - ZZ  # hᵀ Σ⁻¹ h
+    B = Rh - np.einsum("jak,jb->kab", Z, Z1)  # hᵀ Σ⁻¹ 1
+    if ramp is None:
+        C = B[0]  # 1ᵀ Σ⁻¹ 1, as the step's first (bit for bit)
     Ci = np.linalg.inv(C)
-    b = a - np.einsum("kab,b->ka", B @ Ci, a[0])
+    b = a - np.einsum("kab,b->ka", B @ Ci, a0)
     A = D - B @ Ci @ B.transpose(0, 2, 1)
     out, steps = np.full(len(x), np.nan), np.full((len(x), 2), np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -288,12 +317,59 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
             first, bound = (float(np.nanmax(stats)) if np.isfinite(stats).any() else np.nan), limit
         if not np.isfinite(candidates).any():
             break
+        segment, at_change = end, float(np.max(candidates))
         change = end = MIN_SEGMENT + int(np.argmax(candidates))
+    if change is not None:
+        change, drifted = drift_onset(x[:segment], Rw[:segment], G[..., :segment], t[:segment], change, at_change)
+    else:  # no step one fix sees: a drift to the record's end whose way by then one fix sees
+        change = _drift(x, Rw, G, t, spread, seen_at, level)
+        drifted = change is not None
     if change is None:
         throughout = order_test and wanders(x, Rw, G)
     else:
         throughout = change < MIN_STILL or wanders(x[:change], Rw[:change], G[..., :change])
-    return StillVerdict(len(k), s2, first, bound, k, change, throughout, detectable)
+    return StillVerdict(len(k), s2, first, bound, k, change, throughout, detectable, drifted)
+
+
+def _drift(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, spread: np.ndarray, seen_at: float,
+           level: float) -> int | None:
+    """The first moved fix of a drift at a constant velocity from it to the record's end (:func:`step_statistics`
+    with the times as the ramp) whose statistic exceeds :func:`threshold` over the onsets scanned and whose way by the
+    record's end a single fix sees (beyond ``seen_at`` in the metric ``spread`` (2, 2) [m⁻²]); None where none does."""
+    r = (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
+    stats, rates = step_statistics(x, R, G, r)
+    onsets = np.arange(MIN_SEGMENT, len(x) - MIN_SEGMENT + 1)
+    way = rates[onsets] * (r[-1] - r[onsets - 1])[:, None]
+    seen = np.einsum("ka,ab,kb->k", way, spread, way) > seen_at
+    candidates = np.where(seen & (stats[onsets] > threshold(len(onsets), level)), stats[onsets], -np.inf)
+    return int(onsets[np.argmax(candidates)]) if np.isfinite(candidates).any() else None
+
+
+def drift_onset(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, change: int,
+                step: float) -> tuple[int, bool]:
+    """Where a tag whose fixes step at ``change`` (the binary segmentation's first change, found in the segment
+    ``x`` (N, 2) [m] at times ``t`` (N,) [s]; its step statistic ``step``) began to move: the onset of a drift
+    (:func:`step_statistics` with a ramp: a constant velocity from the onset to the segment's end, its onset up to
+    the segment's last fix but one, or one that stops at ``change``, the step itself its latest onset) where one
+    explains the fixes better than the step by more than χ²(2) at :data:`STEP_LEVEL` (a dead fish carried off by a
+    current: a step is found where the fixes' mean has moved by what a single fix sees, after its onset; or, where
+    the segment ends within :data:`MIN_SEGMENT` fixes of the onset, before it). ``R`` (N, 2, 2) [m²] and ``G``
+    (q, 2, N) [m] as in :func:`step_statistics`.
+
+    Returns
+    -------
+    onset : int
+        The first moved fix: ``change`` where no drift explains the fixes better.
+    drifted : bool
+        Whether a drift explains the fixes better than the step.
+    """
+    r = (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
+    best, onset, drifted = step - 2.0 * np.log(1.0 - STEP_LEVEL), change, False
+    for ramp, last in ((r, len(x) - 2), (np.minimum(r, r[change]), change)):
+        stats = step_statistics(x, R, G, ramp)[0][MIN_SEGMENT:last + 1]
+        if np.isfinite(stats).any() and np.nanmax(stats) > best:
+            best, onset, drifted = float(np.nanmax(stats)), MIN_SEGMENT + int(np.nanargmax(stats)), True
+    return onset, drifted
 
 
 def order_ratio(x: np.ndarray) -> np.ndarray:
@@ -364,6 +440,6 @@ def slow_covariance(receivers: np.ndarray, position: np.ndarray, c: float, heard
 
 
 __all__ = ["DRAWS", "HUBER", "LEVEL", "MARGIN", "MAX_BASIS", "MAX_ORDERED", "MEDIAN_HALF_WIDTH", "MIN_SEGMENT",
-           "MIN_STILL", "SLOW_TIME_S", "SPECTRAL_REACH", "SPEED_WANDER", "STEP_LEVEL", "StillVerdict", "order_ratio",
-           "slow_columns", "slow_covariance", "step_statistics", "still_verdict", "threshold", "wanders",
-           "white_scale"]
+           "MIN_STILL", "SLOW_TIME_S", "SPECTRAL_REACH", "SPEED_WANDER", "STEP_LEVEL", "StillVerdict", "drift_onset",
+           "order_ratio", "slow_columns", "slow_covariance", "step_statistics", "still_verdict", "threshold",
+           "wanders", "white_scale"]

@@ -220,15 +220,16 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
             fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)))
 
 
-def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma, sigma, last, first):
+def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma, sigma, last, first, drifted):
     """A still tag that moved once after its last still trusted fix ``last`` (its first moved one ``first``): the
     split (the first row at its second place; the rows between the two given to the place their arrivals fit,
-    :func:`split_ping`), its first place from the rows before the split and its second from the rest (each
+    :func:`split_ping`, where it stepped; every one moved where it ``drifted``: its second place, the drift's mean,
+    fits none of them), its first place from the rows before the split and its second from the rest (each
     :func:`_place`'s tuple; the second None where too few receivers heard it there)."""
     rows = np.arange(len(toa))
     before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
     split = last + 1
-    if first > last + 1:  # the rows between the two trusted fixes: each side's place from its own side's rows
+    if first > last + 1 and not drifted:  # the rows between the two trusted fixes: each side's place from its own
         try:
             went = stationary_track(toa[first:], positions, c, fx[first:], sigma_toa).position
         except ModelError:  # too few receivers heard it after: the rows between flagged
@@ -343,7 +344,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     if went and not throughout:  # its still part (the rows to its last still trusted fix) and where it went
         last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
         args = (toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma)
-        split, before, gone = _moved_once(*args, sigma, last, first)
+        split, before, gone = _moved_once(*args, sigma, last, first, verdict.drifted)
         explained, places_tried = _two_places_explained(toa, split, before[5], None if gone is None else gone[5]), 2
     # no one place (the still part's and where it went, where it moved): it moved the whole time where its fixes say
     # it moved or wander, else unchecked
@@ -356,7 +357,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     own, held = np.repeat(pooled.covariance[None], m, axis=0), np.repeat(extra[None], m, axis=0)
     after, change = np.zeros(m, bool) | (went and throughout), None
     if went and not throughout:  # the rows from the split moved
-        change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first])}
+        change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first]),
+                  "drift": verdict.drifted}
         after[split:] = True
         pooled, extra, spread, gains, changed, _ = before
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)

@@ -131,8 +131,11 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
                 f"wander {beyond}; every row flagged (track it with --motion moving)", True)
         else:
             split = change.get("split_ping", change["last_still_ping"] + 1)
-            say(f"sblsim: warning: the tag moved after ping {split - 1} (its last still trusted fix at ping "
-                f"{change['last_still_ping']}, the pings between given to the place their arrivals fit): from ping "
+            how = ("drifted off (its fixes fit a drift from there better than a step) after ping "
+                   f"{split - 1} (its last still trusted fix, the pings after it flagged)" if change.get("drift") else
+                   f"moved after ping {split - 1} (its last still trusted fix at ping {change['last_still_ping']}, "
+                   "the pings between given to the place their arrivals fit)")
+            say(f"sblsim: warning: the tag {how}: from ping "
                 f"{change['first_moved_ping']} on its fixes lie {change['distance_m']:.3g} m from its place, "
                 f"{beyond}; its {change['rows_moved']} rows from ping {split} flagged tag_moved and placed where it "
                 f"went, the rows before it kept{_not_stayed(change)}", True)

@@ -20,12 +20,14 @@ TAG = np.array([780.0, 560.0])
 DAY = 86400.0
 
 
-def _fixes(seed: int, n: int = 720, move: np.ndarray | None = None, walk: float | None = None):
+def _fixes(seed: int, n: int = 720, move: np.ndarray | None = None, walk: float | None = None,
+           drift: np.ndarray | None = None, drift_pings: int | None = None):
     """Simulated single-ping fixes of a tag at TAG (ping every 120 ± 24 s over a day): each fix's own error (its
     covariance of 0.2 m per axis, 0.1 m correlated) and the sound speed's change, 1,480 ± 5 m/s over the day in a
     sine of random phase, which scales every range about the tag's receivers and so moves the fix along
-    ``∂p/∂c`` (found here by refitting exact ranges at two speeds); a step of ``move`` at the middle ping, or a
-    random walk of ``walk`` [m] per ping."""
+    ``∂p/∂c`` (found here by refitting exact ranges at two speeds); a step of ``move`` at the middle ping, a
+    random walk of ``walk`` [m] per ping, or a drift of ``drift`` [m] per ping from the middle ping on (the middle
+    ping the first moved) for ``drift_pings`` pings (None: to the end), then still."""
     rng = np.random.default_rng(seed)
     t = np.cumsum(rng.uniform(96.0, 144.0, n))
     speed = 5.0 * np.sin(2 * np.pi * t / DAY + rng.uniform(0, 2 * np.pi))
@@ -37,6 +39,9 @@ def _fixes(seed: int, n: int = 720, move: np.ndarray | None = None, walk: float 
         truth[n // 2:] += move
     if walk is not None:
         truth += np.cumsum(rng.normal(scale=walk, size=(n, 2)), axis=0)
+    if drift is not None:
+        pings = np.arange(1, n - n // 2 + 1)
+        truth[n // 2:] += np.minimum(pings, drift_pings or n)[:, None] * drift
     return x + truth - TAG, R, t
 
 
@@ -60,9 +65,12 @@ def _slow(p: np.ndarray = TAG) -> np.ndarray:
     return sv.SPEED_WANDER**2 * np.outer(along, along)
 
 
-def test_the_step_statistic_is_the_dense_generalised_least_squares_one():
-    """Λ(τ) of every τ equals the Wald statistic of the step in the regression ``x = 1 μ + h_τ δ + ε``, ε ~ N(0,
-    diag(R_k) + G Gᵀ), solved here with the dense 2N × 2N covariance; the step is its δ."""
+@pytest.mark.parametrize("change", ["step", "drift", "drift_stopping"])
+def test_the_step_statistic_is_the_dense_generalised_least_squares_one(change):
+    """Λ(τ) of every τ equals the Wald statistic of the change in the regression ``x = 1 μ + h_τ δ + ε``, ε ~ N(0,
+    diag(R_k) + G Gᵀ), solved here with the dense 2N × 2N covariance; the change is its δ. ``h_τ``: 1 from fix τ on
+    (a step), or a ramp ``r_k − r_τ−1`` from fix τ on with ``r`` the times scaled to a day (a drift to the end) or
+    those clipped at fix 30's (a drift that stops there; τ up to 30)."""
     rng = np.random.default_rng(1)
     n = 40
     t = np.sort(rng.uniform(0, DAY, n))
@@ -70,20 +78,22 @@ def test_the_step_statistic_is_the_dense_generalised_least_squares_one():
     x = rng.normal(size=(n, 2)) * np.sqrt(R[:, [0, 1], [0, 1]])
     x[25:] += [1.5, -0.5]
     G = sv.slow_columns(t, np.array([[1.0, 0.3], [0.3, 0.5]]))
-    stats, steps = sv.step_statistics(x, R, G)
+    ramp = {"step": None, "drift": t / DAY, "drift_stopping": np.minimum(t, t[30]) / DAY}[change]
+    stats, steps = sv.step_statistics(x, R, G, ramp)
     covariance = np.zeros((2 * n, 2 * n))
     for k in range(n):
         covariance[2 * k:2 * k + 2, 2 * k:2 * k + 2] = R[k]
     dense = G.transpose(2, 1, 0).reshape(2 * n, -1)
     W = np.linalg.inv(covariance + dense @ dense.T)
     one = np.tile(np.eye(2), (n, 1))
-    for tau in range(1, n):
-        X = np.hstack([one, np.vstack([np.zeros((2 * tau, 2)), np.tile(np.eye(2), (n - tau, 1))])])
+    for tau in range(1, 31 if change == "drift_stopping" else n):
+        h = np.where(np.arange(n) >= tau, 1.0 if ramp is None else ramp - ramp[tau - 1], 0.0)
+        X = np.hstack([one, np.kron(h[:, None], np.eye(2))])
         cov = np.linalg.inv(X.T @ W @ X)
         beta = cov @ X.T @ W @ x.reshape(-1)
         assert stats[tau] == pytest.approx(beta[2:] @ np.linalg.solve(cov[2:, 2:], beta[2:]), rel=1e-8)
-        np.testing.assert_allclose(steps[tau], beta[2:], rtol=1e-8, atol=1e-10)
-    assert np.isnan(stats[0]) and int(np.nanargmax(stats)) == 25
+        np.testing.assert_allclose(steps[tau], beta[2:], rtol=1e-8, atol=1e-10 * np.abs(beta[2:]).max())
+    assert np.isnan(stats[0]) and (int(np.nanargmax(stats)) == 25 or ramp is not None)
 
 
 def test_the_slow_columns_hold_the_squared_exponential_kernel():
@@ -145,6 +155,28 @@ def test_a_tag_moved_20_m_half_way_is_found_at_its_move():
         verdict = sv.still_verdict(x, R, t, np.ones(len(x), bool), _slow())
         assert verdict.change is not None and abs(int(verdict.order[verdict.change]) - len(x) // 2) <= 3, verdict
         assert not verdict.throughout and verdict.statistic > verdict.threshold
+
+
+def test_a_tag_moved_20_m_is_a_step_not_a_drift():
+    """The 20 m move half way (3 seeds): no drift explains the fixes better than the step (``drifted`` False), the
+    change the first fix after the move."""
+    for seed in range(3):
+        x, R, t = _fixes(seed, move=np.array([20.0, 0.0]))
+        verdict = sv.still_verdict(x, R, t, np.ones(len(x), bool), _slow())
+        assert not verdict.drifted and int(verdict.order[verdict.change]) == len(x) // 2, verdict
+
+
+@pytest.mark.parametrize("speed, pings", [(1.0, None), (0.2, None), (0.05, None), (1.0, 20)])
+def test_a_tag_drifting_away_is_found_from_its_onset(speed, pings):
+    """A still tag that drifts from its middle ping at ``speed`` [m] a ping (a dead fish in a current; each fix 0.2 m
+    of noise a side), to the end or for 20 pings then still: the first moved fix within 3 fixes of the onset (3
+    seeds), called a drift, its still part not wandering. A step's change is found where the fixes' mean has moved by
+    what one fix sees (about 0.9 m here): at 0.05 m a ping about 20 pings late, at 1 m a ping up to 3 late."""
+    for seed in range(3):
+        x, R, t = _fixes(seed, drift=np.array([0.0, speed]), drift_pings=pings)
+        verdict = sv.still_verdict(x, R, t, np.ones(len(x), bool), _slow())
+        assert verdict.change is not None and verdict.drifted and not verdict.throughout, verdict
+        assert abs(int(verdict.order[verdict.change]) - len(x) // 2) <= 3, (seed, verdict.order[verdict.change])
 
 
 def test_the_detectable_step_is_the_smallest_move_the_verdict_finds():
@@ -240,16 +272,21 @@ def test_the_order_test_takes_a_fix_covariance_singular_to_rounding():
 
 
 def test_the_order_test_asked_for_finds_a_slow_wander_no_step_shows():
-    """A walk of 0.1 m a fix among fixes of 1 m noise (200, ten minutes apart): no step a single fix could see, so no
-    change; asked for (``order_test``), the fixes' order says it moved the whole time (seeds 0 and 1), and never on
-    fixes of white noise alone (10 seeds); not asked, ``throughout`` stays False without a change."""
+    """A walk of 0.1 m a fix among fixes of 1 m noise (200, ten minutes apart): no step a single fix could see; asked
+    for (``order_test``), the fixes' order says it moved the whole time (seed 0: no drift one fix sees either; not
+    asked, ``throughout`` stays False without a change), or a drift to the end one fix sees has it move from fix 40
+    (seed 1, asked or not); never on fixes of white noise alone (10 seeds: no change, not moved throughout)."""
     n, t, R = 200, np.arange(200) * 600.0, np.tile(np.eye(2), (200, 1, 1))
     for seed in (0, 1):
         rng = np.random.default_rng(seed)
         x = np.cumsum(rng.normal(scale=0.1, size=(n, 2)), axis=0) + rng.normal(size=(n, 2))
         asked = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2), order_test=True)
         plain = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2))
-        assert asked.change is None and asked.throughout and not plain.throughout, (asked, plain)
+        if seed == 0:
+            assert asked.change is None and asked.throughout and not plain.throughout, (asked, plain)
+        else:
+            assert asked.drifted and plain.drifted and asked.change == plain.change == 40, (asked, plain)
     for seed in range(10):
         x = np.random.default_rng(100 + seed).normal(size=(n, 2))
-        assert not sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2), order_test=True).throughout
+        verdict = sv.still_verdict(x, R, t, np.ones(n, bool), 1e-6 * np.eye(2), order_test=True)
+        assert verdict.change is None and not verdict.throughout, verdict
