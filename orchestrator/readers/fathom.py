@@ -52,12 +52,23 @@ def fathom_records(text: str, name: str, what: str, max_rows: int, max_cells: in
     """
     tables = fathom_tables(text, name, what, FATHOM_RECORDS, max_rows, max_cells)
     if "DET" not in tables:
-        raise ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom "
-                         "CSV holding detection records")
+        raise no_det_desc(text, name, what)
     header, body, lines = tables["DET"]
     if "DET_SENS" in tables:
         body.attrs["sensors"] = tables["DET_SENS"]
     return header, body, lines
+
+
+def no_det_desc(text: str, name: str, what: str) -> ModelError:
+    """The one-line refusal of a Fathom CSV ``text`` (its whole text, or its first part) without a ``DET_DESC`` line
+    Fathom wrote: one whose columns a spreadsheet saved again with semicolons or tabs is said to be so."""
+    separated = re.search(r'(?m)^[ "]*DET_DESC"?[ ]*([;\t])', text)
+    if separated is not None:  # Fathom writes commas: a spreadsheet saved it again
+        said = "semicolons (as a spreadsheet in a decimal-comma locale saves CSV)" if separated[1] == ";" else "tabs"
+        return ModelError(f"{what}: {name!r}: its DET_DESC line's columns are separated by {said}; allowed: "
+                          "Fathom's own CSV, comma-separated (export it again from Fathom)")
+    return ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom CSV holding "
+                      "detection records")
 
 
 def fathom_tables(text: str, name: str, what: str, records: tuple[str, ...], max_rows: int,

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 import time as clock
 from collections import Counter
@@ -58,9 +59,10 @@ from sblsim.orchestrator.readers.detections import (
     check_parts,
     sniff_format,
 )
+from sblsim.orchestrator.readers.fathom import no_det_desc
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
-from sblsim.orchestrator.store.reading import Coded, NotUtf8, frames
+from sblsim.orchestrator.store.reading import FIRST_FATHOM_BYTES, Coded, NotUtf8, frames
 
 #: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract of a week
 #: peaked at 0.39-0.48 GiB with it, two pieces read at once while the one before them is written; 0.37-0.38 GiB with
@@ -170,6 +172,11 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
             files += 1
         if written is not None:
             written.result()
+    if not rows and format == "fathom":  # no DET record read: said as the whole-file reader says it
+        with path.open("rb") as handle:
+            head = handle.read(FIRST_FATHOM_BYTES).decode(encoding, errors="replace")
+        if not re.search(r'(?m)^[ "]*DET_DESC"?,', head):
+            raise no_det_desc(head, str(path), _WHAT)
     if not rows:
         raise ModelError(f"{_WHAT}: {str(path)!r} holds a header and no detections")
     resets = clocks.finish() if clocks is not None else []

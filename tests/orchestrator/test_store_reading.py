@@ -63,6 +63,25 @@ def test_a_fathom_piece_read_in_order_refuses_in_its_turn(tmp_path):
         ingest(path, tmp_path / "s", "fathom", piece_bytes=4096)
 
 
+@pytest.mark.parametrize("change, said", [(lambda t: t.replace(",", ";"), "separated by semicolons"),
+                                          (lambda t: t.replace(",", "\t"), "separated by tabs"),
+                                          (lambda t: t.replace("\nDET_DESC,", "\nDET_DESCRIPTION,"), "no DET_DESC line")])
+def test_a_fathom_csv_without_its_det_desc_line_is_refused_as_the_whole_file_reader_refuses_it(tmp_path, change, said):
+    """A Fathom CSV a spreadsheet saved with semicolons or tabs, and one without a DET_DESC line: the store refuses it
+    in the whole-file reader's own line (it said "holds a header and no detections"), no folder left."""
+    from sblsim.orchestrator.readers.detections import read_detections
+
+    d = simulate_study(n_receivers=4, n_tags=2, days=0.02, seed=8).detections.reset_index(drop=True)
+    path = tmp_path / "fathom.csv"
+    path.write_text(change(fathom_text(d)))
+    with pytest.raises(ModelError) as whole:
+        read_detections(path, "fathom")
+    with pytest.raises(ModelError) as stored:
+        ingest(path, tmp_path / "s", "fathom", piece_bytes=4096)
+    assert said in str(stored.value) and str(stored.value) == str(whole.value), (stored.value, whole.value)
+    assert not (tmp_path / "s").exists()
+
+
 def test_one_thread_or_several_store_the_same_bytes(lines, tmp_path, monkeypatch):
     path = tmp_path / "d.csv"
     path.write_text("\n".join(lines) + "\n")

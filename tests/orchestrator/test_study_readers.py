@@ -141,6 +141,9 @@ def test_a_fathom_csv_against_the_csv_module(tmp_path):
     (lambda t: t.replace("2021-04-20 17:33:05", "2021-04-31 17:33:05", 2), "a date and time that exists"),
     (lambda t: t.replace("A69-1601-4555", "A69-1601-../x", 1), "column Full ID"),
     (lambda t: t.replace("Full ID", "Full Identity", 1), "Full ID missing"),
+    (lambda t: t.replace(",", ";"), "DET_DESC line's columns are separated by semicolons"),
+    (lambda t: t.replace(",", "\t"), "DET_DESC line's columns are separated by tabs"),
+    (lambda t: t.replace(",", ";").replace("\nDET_DESC", '\n"DET_DESC"'), "separated by semicolons"),
 ])
 def test_bad_fathom_files_are_refused_in_one_line(tmp_path, change, found):
     rows = [_fathom_row("2021-04-20 17:32:01", "461396", "A69-1602-4555"),
