@@ -335,14 +335,21 @@ def _drift(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, spread: n
            level: float) -> int | None:
     """The first moved fix of a drift at a constant velocity from it to the record's end (:func:`step_statistics`
     with the times as the ramp) whose statistic exceeds :func:`threshold` over the onsets scanned and whose way by the
-    record's end a single fix sees (beyond ``seen_at`` in the metric ``spread`` (2, 2) [m⁻²]); None where none does."""
+    record's end a single fix sees (beyond ``seen_at`` in the metric ``spread`` (2, 2) [m⁻²]), in the fit and in the
+    fixes themselves (the median of the last quarter of those after the onset against that of those before it: over
+    a long record a wander its slow errors' model does not hold fits a ramp whose way is none); None where none does.
+    """
     r = (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
     stats, rates = step_statistics(x, R, G, r)
     onsets = np.arange(MIN_SEGMENT, len(x) - MIN_SEGMENT + 1)
     way = rates[onsets] * (r[-1] - r[onsets - 1])[:, None]
     seen = np.einsum("ka,ab,kb->k", way, spread, way) > seen_at
     candidates = np.where(seen & (stats[onsets] > threshold(len(onsets), level)), stats[onsets], -np.inf)
-    return int(onsets[np.argmax(candidates)]) if np.isfinite(candidates).any() else None
+    if not np.isfinite(candidates).any():
+        return None
+    onset = int(onsets[np.argmax(candidates)])
+    went = np.median(x[-max(MIN_SEGMENT, (len(x) - onset) // 4):], axis=0) - np.median(x[:onset], axis=0)
+    return onset if went @ spread @ went > seen_at else None
 
 
 def drift_onset(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, change: int,

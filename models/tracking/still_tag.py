@@ -287,9 +287,10 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     larger), and a reflection at each receiver as large as its timing noise as the fixes show it. A tag that moved
     keeps its first place on the rows before the change and its second place (where it went) on the rows from the
     split (the pings between its last still trusted fix and its first moved one given to the place their arrivals
-    fit: :func:`split_ping`), those flagged; one that moved the whole time keeps one place, every row flagged (an
-    animal). One whose place explains fewer than :data:`MIN_EXPLAINED` of its arrivals (:func:`explained_share`; its
-    two places, where it moved once) is not called still or moved: it moved the whole time where its fixes say it
+    fit: :func:`split_ping`; all of them moved where it drifted off: ``change.drift``), those flagged; one that moved
+    the whole time keeps one place, every row flagged (an animal). One whose place explains fewer than
+    :data:`MIN_EXPLAINED` of its arrivals (:func:`explained_share`; its two places, where it moved once) is not called
+    still or moved: it moved the whole time where its fixes say it
     moved or lie in an order its error terms do not make (an animal whose few trusted fixes scatter far beyond their
     covariance), else ``unchecked``. With fewer than :data:`UNCHECKED_BELOW` trusted fixes nothing tells whether it
     moved: ``unchecked`` (its rows are flagged by the caller), not still.

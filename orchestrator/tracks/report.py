@@ -131,8 +131,8 @@ def track_lines(outcome: TrackOutcome, toa: Path, truth: Path | None, kept: Sequ
                 f"wander {beyond}; every row flagged (track it with --motion moving)", True)
         else:
             split = change.get("split_ping", change["last_still_ping"] + 1)
-            how = ("drifted off (its fixes fit a drift from there better than a step) after ping "
-                   f"{split - 1} (its last still trusted fix, the pings after it flagged)" if change.get("drift") else
+            how = (f"drifted off after ping {split - 1} (its last still trusted fix; its fixes fit a drift from "
+                   "there on, the pings after it flagged)" if change.get("drift") else
                    f"moved after ping {split - 1} (its last still trusted fix at ping {change['last_still_ping']}, "
                    "the pings between given to the place their arrivals fit)")
             say(f"sblsim: warning: the tag {how}: from ping "

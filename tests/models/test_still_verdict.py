@@ -179,6 +179,24 @@ def test_a_tag_drifting_away_is_found_from_its_onset(speed, pings):
         assert abs(int(verdict.order[verdict.change]) - len(x) // 2) <= 3, (seed, verdict.order[verdict.change])
 
 
+def test_a_long_records_daily_wander_is_no_drift():
+    """6,000 fixes a ping every 540-660 s (41 days) of a still tag whose fixes wander 0.6 m with the day (a sound
+    speed's daily cycle along the array's scale direction) beside 0.3 m of white noise: over that record the slow
+    errors' correlation time is lengthened to a day and more, which does not hold the daily wander (the step
+    statistic 191 to 236 against a threshold of 31), and a drift fitted near the record's end had a way one fix
+    sees; its fixes' own medians did not move, and no change is found (4 seeds)."""
+    n, along = 6000, np.array([0.8, 0.6])
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        t = np.cumsum(rng.uniform(540.0, 660.0, n))
+        wander = 0.6 * np.sin(2 * np.pi * t / DAY + rng.uniform(0, 2 * np.pi))[:, None] * along
+        x = wander + 0.3 * rng.standard_normal((n, 2))
+        verdict = sv.still_verdict(x, np.tile(0.09 * np.eye(2), (n, 1, 1)), t, np.ones(n, bool),
+                                   0.36 * np.outer(along, along))
+        assert verdict.change is None and not verdict.drifted, verdict
+        assert verdict.statistic > 3 * verdict.threshold  # the model does not hold the wander: the fixes decide
+
+
 def test_the_detectable_step_is_the_smallest_move_the_verdict_finds():
     """Fixes of 0.2 m of white noise and no slow error, 600 a minute apart: the detectable step is √(χ²(2, 0.99)) σ
     in both directions (the dispersion near 1), a move of 1.5 times it half way is found at its fix, one of half of it

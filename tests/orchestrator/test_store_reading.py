@@ -63,9 +63,9 @@ def test_a_fathom_piece_read_in_order_refuses_in_its_turn(tmp_path):
         ingest(path, tmp_path / "s", "fathom", piece_bytes=4096)
 
 
-@pytest.mark.parametrize("change, said", [(lambda t: t.replace(",", ";"), "separated by semicolons"),
-                                          (lambda t: t.replace(",", "\t"), "separated by tabs"),
-                                          (lambda t: t.replace("\nDET_DESC,", "\nDET_DESCRIPTION,"), "no DET_DESC line")])
+@pytest.mark.parametrize("change, said", [
+    (lambda t: t.replace(",", ";"), "separated by semicolons"), (lambda t: t.replace(",", "\t"), "separated by tabs"),
+    (lambda t: t.replace("\nDET_DESC,", "\nDET_DESCRIPTION,"), "no DET_DESC line")])
 def test_a_fathom_csv_without_its_det_desc_line_is_refused_as_the_whole_file_reader_refuses_it(tmp_path, change, said):
     """A Fathom CSV a spreadsheet saved with semicolons or tabs, and one without a DET_DESC line: the store refuses it
     in the whole-file reader's own line (it said "holds a header and no detections"), no folder left."""
