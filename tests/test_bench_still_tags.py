@@ -90,3 +90,20 @@ def test_a_bad_argument_is_one_line_and_exit_2(args, message):
                          text=True, timeout=120)
     err = run.stderr.strip().splitlines()
     assert run.returncode == 2 and message in err[-1], run.stderr
+
+
+def test_a_drift_moves_the_tag_from_the_middle_ping_and_rows_are_matched_to_their_pings(tmp_path):
+    """``drift``: the tag still to the middle ping's predecessor, then along the move's direction by the speed a ping
+    (the middle ping the first moved); :func:`pings` gives each row its ping from the row's time (a row a few
+    milliseconds off the emission, some pings without a row), as the record's own times say."""
+    from types import SimpleNamespace
+
+    how = bench.Record(pings=100, receivers=6, site="canal")
+    places = bench.record(tmp_path, 2, drift=0.5, how=how)[2]
+    steps = np.linalg.norm(np.diff(places, axis=0), axis=1)
+    assert np.allclose(places[:50], bench.CANAL_TAG) and np.allclose(steps[49:], 0.5) and not steps[:49].any()
+    assert np.allclose((places[-1] - places[49]) / np.linalg.norm(places[-1] - places[49]), [0.0, 1.0])
+    t = np.cumsum(np.random.default_rng(2).uniform(*how.interval, how.pings))
+    kept = np.setdiff1d(np.arange(how.pings), [0, 17, 18, 99])
+    track = pd.DataFrame({"time": t[kept] + np.random.default_rng(0).uniform(-0.005, 0.005, len(kept))})
+    assert np.array_equal(bench.pings(SimpleNamespace(track=track), 2, how), kept)
