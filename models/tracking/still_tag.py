@@ -172,8 +172,9 @@ class StillTag:
     """A still tag's rows (:func:`still_tag`): the ``pings`` (rows of the TOA matrix) with an emission, their
     ``emissions`` [s], each row's ``places`` (dim,) [m] and ``covariances`` (the pooled fit's own) and ``consider``
     terms [m²], the arrivals each row kept (``heard``), the rows that ``moved`` (from the change on), whether its
-    motion is ``unchecked`` (fewer trusted fixes than the verdict tests: :data:`UNCHECKED_BELOW`) and the ``summary``
-    (``summary.json``'s ``motion``)."""
+    motion is ``unchecked`` (fewer trusted fixes than the verdict tests: :data:`UNCHECKED_BELOW`), the ``summary``
+    (``summary.json``'s ``motion``) and the times of arrival (m, n) [s] less the sound speed's change fitted at its
+    place (or places), each row of the record (``corrected``: the times given where no change was fitted)."""
 
     pings: np.ndarray
     emissions: np.ndarray
@@ -184,6 +185,7 @@ class StillTag:
     moved: np.ndarray
     unchecked: bool
     summary: dict[str, Any]
+    corrected: np.ndarray | None = None
 
 
 def explained_share(pooled, heard: np.ndarray) -> float:
@@ -202,9 +204,9 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     """One place of a still tag from the pings ``rows``: its pooled fit (the sound speed's change fitted beside it:
     :func:`changing_track`), the consider terms and the receivers' term summed (dim, dim) [m²], the receivers'
     term's DRMS [m], the survey's gains (:func:`survey_gains`), the speed's change fitted [m/s] (its least and
-    largest; None where the record is too short to fit it) and the share of the arrivals the place explains
-    (:func:`explained_share`); the consider terms and the gains from one bias sensitivity, all on the times of
-    arrival less the speed's change."""
+    largest; None where the record is too short to fit it), the share of the arrivals the place explains
+    (:func:`explained_share`) and the rows' times of arrival less the speed's change (the consider terms and the
+    gains from one bias sensitivity, all on those)."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     fitted = changing_track(toa[rows], positions, c, fixes[rows], sigma_toa)
@@ -217,7 +219,7 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
     beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
     return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
-            fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)))
+            fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)), y)
 
 
 def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma, sigma, last, first, drifted):
@@ -330,8 +332,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
     rows = np.arange(m)
-    pooled, extra, spread, gains, changed, explained = _place(toa, positions, c, fx, rows, sigma_toa, survey,
-                                                              speed_sigma, clock_sigma)
+    pooled, extra, spread, gains, changed, explained, corrected = _place(toa, positions, c, fx, rows, sigma_toa,
+                                                                         survey, speed_sigma, clock_sigma)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
     slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
@@ -361,7 +363,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
         change = {"last_still_ping": last, "first_moved_ping": first, "time_s": float(fe[first]),
                   "drift": verdict.drifted}
         after[split:] = True
-        pooled, extra, spread, gains, changed, _ = before
+        pooled, extra, spread, gains, changed, _, corrected = before
+        corrected = np.vstack([corrected, toa[split:] if gone is None else gone[6]])
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)
         places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
         change["split_ping"] = split
@@ -394,7 +397,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     return StillTag(kp, emissions[kp], places[kp], own[kp], held[kp], kept[kp], after[kp], unchecked,
                     {"still": summary, "moved": bool(went),
                      "moved_test": {"trusted_fixes": count, "successive_ratio": _number(ratio),
-                                    "permutations": PERMUTATIONS, "in_order": bool(ordered)}})
+                                    "permutations": PERMUTATIONS, "in_order": bool(ordered)}}, corrected)
 
 
 def _number(x: float) -> float | None:

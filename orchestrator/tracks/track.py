@@ -249,18 +249,21 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         return out
 
     def rows(estimator: str, ping: np.ndarray, t: np.ndarray, p: np.ndarray, cov: np.ndarray, heard: np.ndarray,
-             restarts: np.ndarray | None = None, consider: np.ndarray | None = None):
-        """An estimator's rows, checked against the data with its own covariance ``cov``; reported with
-        ``consider`` (the consider terms: the receivers' survey, the sound speed, the depth's prior) added, which
-        its own-uncertainty limit takes too."""
+             restarts: np.ndarray | None = None, consider: np.ndarray | None = None, against: tuple | None = None):
+        """An estimator's rows, checked against the data with its own covariance ``cov`` (the times of arrival, the
+        fixes, their trust, the arrivals each explains and their protection levels: ``against``, else the
+        record's); reported with ``consider`` (the consider terms: the receivers' survey, the sound speed, the
+        depth's prior) added, which its own-uncertainty limit takes too."""
+        times, fixes, fixes_cov, trust, fix_agree, levels = against or (toa, fx, fc, trusted, fix_explained,
+                                                                        protection)
         reported = cov if consider is None else cov + consider[:, :dim, :dim]
-        agree = qa.explained(toa[ping], positions, p, c, sigma)
-        checked = qa.check_track(t, p, cov, fx[ping], fc[ping], trusted[ping] & (estimator != "fix"),
+        agree = qa.explained(times[ping], positions, p, c, sigma)
+        checked = qa.check_track(t, p, cov, fixes[ping], fixes_cov[ping], trust[ping] & (estimator != "fix"),
                                  None if restarts is None else np.isin(ping, restarts),
-                                 explained=agree, fix_used=fix_explained[ping], reported=reported,
+                                 explained=agree, fix_used=fix_agree[ping], reported=reported,
                                  acceleration_psd=None if stationary else settings.acceleration_psd,
                                  known_depth=None if depth_known is None else depth_known[ping],
-                                 fix_protection=protection[ping])
+                                 fix_protection=levels[ping])
         if estimator == "robust":  # the track the other estimators' rows are checked against
             track_rows.update(ping=ping, p=p, cov=cov, agree=agree, ok=checked.quality == "ok")
         elif track_rows:  # another estimator's rows off the track where it is ok (qa.off_the_track)
@@ -286,7 +289,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     if stationary:  # one place (or two, where it moved beyond its error terms: the rows from the change flagged)
         still = still_tag(toa, positions, c, (fx, fe, fc, fused), trusted, sigma, survey, speed, clock_sigma)
         rows("stationary", still.pings, still.emissions, still.places, still.covariances, still.heard, None,
-             still.consider)
+             still.consider, _checked_against(still.corrected, toa, positions, c, sigma, depth, depth_sigma))
         motion_info |= still.summary | {"consider_terms": [term for term, known in (  # the speed's: where not fitted
             ("survey", survey is not None),
             ("sound speed", bool(speed_sigma) and still.summary["still"]["speed_change_m_s"] is None),
@@ -441,6 +444,26 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     return TrackOutcome(chosen, estimates, errors, result, summary, bound, truth, (names, positions),
                         _set_aside_table(read, stray, names, time_origin) if aside["shortest_s"] is not None
                         else None)
+
+
+def _checked_against(corrected: np.ndarray | None, toa: np.ndarray, positions: np.ndarray, c: float,
+                     sigma: np.ndarray, depth: np.ndarray | None, depth_sigma: float) -> tuple | None:
+    """What a still tag's rows are checked against where the sound speed's change over its record was fitted at its
+    place (``corrected`` (m, n) [s]: the times of arrival less it, :class:`~sblsim.models.tracking.still_tag.
+    StillTag`): those times, their single-ping fixes at ``c`` [m/s], which of those are trusted, the arrivals each
+    explains and their protection levels (as the record's own, made again); None where nothing was corrected (the
+    record's own). A fix made at one speed, where the water's warmed by metres a second over a season, lies off the
+    place fitted with the speed's change by more than the two covariances allow, and the row was flagged."""
+    from sblsim.models.receiver import toa_tracking as tt
+
+    if corrected is None or np.array_equal(corrected, toa, equal_nan=True):
+        return None
+    fx, _, fc, used, chi2 = tt.fix_pings(corrected, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
+    known = None if depth is None else np.isfinite(depth)
+    trusted = qa.trusted_fixes(fx, fc, used.sum(axis=1), np.isfinite(corrected).sum(axis=1), chi2,
+                               positions.shape[1], known)
+    levels = np.where(known if known is not None else False, np.nan, protection_levels(positions, fx, used, c, sigma))
+    return corrected, fx, fc, trusted, qa.explained(corrected, positions, fx, c, sigma), levels
 
 
 def _set_aside_table(toa: np.ndarray, stray: np.ndarray, names: list[str], time_origin: float | None):

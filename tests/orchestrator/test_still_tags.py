@@ -148,6 +148,32 @@ def test_a_still_tag_drifting_off_is_flagged_from_its_onset_and_said_to_drift(tm
         assert len(said) == 1 and f"rows from ping {first} flagged" in said[0], said
 
 
+@pytest.mark.slow
+def test_a_still_tag_in_water_warming_over_a_season_is_not_flagged_on_four_receivers(tmp_path):
+    """A still tag on the canal's four receivers, 6,000 pings at 540-660 s (41 days) in water warming from 1,480 to
+    1,490 m/s over them (and ±2 m/s with the day): still, and none of its rows flagged. Its place was right (NEES
+    2.4) but 2,653 of its rows were flagged ``off_trusted_fixes``: the speed calibrated as one place (1,502 m/s)
+    made its single-ping fixes, and the place fitted with the speed's change lay off them by more than the two
+    covariances allow; its rows are now checked against fixes made from the times of arrival less that change."""
+    rng = np.random.default_rng(0)
+    n = 6000
+    t = np.cumsum(rng.uniform(540.0, 660.0, n))
+    c = 1480.0 + 10.0 * (t - t[0]) / (t[-1] - t[0]) + 2.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 6.3))
+    toa = t[:, None] + np.linalg.norm(CANAL_TAG - CANAL, axis=1)[None] / c[:, None]
+    toa = toa + SIGMA * rng.normal(size=toa.shape)
+    toa[rng.random(toa.shape) > 0.8] = np.nan
+    write_toa(tmp_path / "toa.txt", toa, NAMES[:4])
+    rows = "\n".join(f"{name},{x:g},{y:g}" for name, (x, y) in zip(NAMES, CANAL))
+    (tmp_path / "receivers.csv").write_text("name,x_m,y_m\n" + rows + "\n")
+    outcome = track(tmp_path / "toa.txt", tmp_path / "receivers.csv", motion="stationary", toa_sigma=SIGMA,
+                    other_filters=False)
+    still = outcome.summary["motion"]["still"]
+    assert still["verdict"] == "still" and still["speed_change_m_s"] is not None, still
+    assert (outcome.track["quality"] == "ok").all(), outcome.track["quality_reason"].value_counts()
+    e = np.asarray(still["place"])[:2] - CANAL_TAG
+    assert e @ np.linalg.solve(np.asarray(still["covariance"])[:2, :2], e) < 9.21
+
+
 def test_on_five_receivers_the_pings_between_two_trusted_fixes_are_placed_by_their_arrivals(tmp_path):
     """Five receivers (four corners and the centre): the pings before a move of 20 m at ping 360 include a run
     without a trusted fix (the last still trusted fix 14 pings before it in this seed), which was all flagged (13
