@@ -29,6 +29,8 @@ from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, r
 from sblsim.orchestrator.readers.binary import not_text, refuse_log
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
 
+#: The separators a spreadsheet saves a table with other than the comma, as a refusal names them.
+SEPARATORS = {";": "semicolons (as a spreadsheet in a decimal-comma locale saves CSV)", "\t": "tabs"}
 #: The options every table is parsed with (each cell a str, none taken as missing; blank lines kept as rows).
 _CSV = dict(header=None, dtype=str, keep_default_na=False, na_filter=False, skip_blank_lines=False, engine="c",
             quotechar='"', on_bad_lines="error")
@@ -259,11 +261,10 @@ def text_table(text: str, name: str, what: str, max_rows: int, first_line: int =
     if not len(frame):
         raise ModelError(f"{what}: {name!r} holds no header; allowed: a header line and rows")
     header = [str(h).strip() for h in frame.iloc[0].tolist()]
-    separated = next((sep for sep in (";", "\t") if len(header) == 1 and sep in header[0]), None)
+    separated = next((sep for sep in SEPARATORS if len(header) == 1 and sep in header[0]), None)
     if separated is not None:  # one cell holding the columns: another separator than the comma
-        said = "semicolons (as a spreadsheet in a decimal-comma locale saves CSV)" if separated == ";" else "tabs"
-        raise ModelError(f"{what}: {name!r}: its header is one cell of columns separated by {said}; allowed: "
-                         "comma-separated values (save it as CSV with commas and decimal points)")
+        raise ModelError(f"{what}: {name!r}: its header is one cell of columns separated by {SEPARATORS[separated]}; "
+                         "allowed: comma-separated values (save it as CSV with commas and decimal points)")
     lower = [h.lower() for h in header]
     twice = next((h for h, low in zip(header, lower) if low and lower.count(low) > 1), None)
     if twice is not None:
@@ -426,6 +427,6 @@ def shown_header(header: list[str]) -> str:
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "file_table", "named", "normal_name", "numbers",
-           "pattern", "per_value", "read_text", "refuse", "shown_header", "tail_text", "text_table", "too_large",
-           "trimmed", "units_row"]
+__all__ = ["SEPARATORS", "TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "file_table", "named",
+           "normal_name", "numbers", "pattern", "per_value", "read_text", "refuse", "shown_header", "tail_text",
+           "text_table", "too_large", "trimmed", "units_row"]

@@ -25,7 +25,15 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, pattern, shown_header, text_table, too_large, trimmed
+from sblsim.orchestrator.readers.cells import (
+    SEPARATORS,
+    column,
+    pattern,
+    shown_header,
+    text_table,
+    too_large,
+    trimmed,
+)
 from sblsim.orchestrator.readers.sensors import sensor_columns
 from sblsim.orchestrator.readers.transmitters import TAG_ID, TRANSMITTER, before_last_dash
 
@@ -64,9 +72,9 @@ def no_det_desc(text: str, name: str, what: str) -> ModelError:
     Fathom wrote: one whose columns a spreadsheet saved again with semicolons or tabs is said to be so."""
     separated = re.search(r'(?m)^[ "]*DET_DESC"?[ ]*([;\t])', text)
     if separated is not None:  # Fathom writes commas: a spreadsheet saved it again
-        said = "semicolons (as a spreadsheet in a decimal-comma locale saves CSV)" if separated[1] == ";" else "tabs"
-        return ModelError(f"{what}: {name!r}: its DET_DESC line's columns are separated by {said}; allowed: "
-                          "Fathom's own CSV, comma-separated (export it again from Fathom)")
+        return ModelError(f"{what}: {name!r}: its DET_DESC line's columns are separated by "
+                          f"{SEPARATORS[separated[1]]}; allowed: Fathom's own CSV, comma-separated (export it again "
+                          "from Fathom)")
     return ModelError(f"{what}: {name!r}: no DET_DESC line (the detections' columns); allowed: a Fathom CSV holding "
                       "detection records")
 

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 import shutil
 import time as clock
 from collections import Counter
@@ -62,7 +61,7 @@ from sblsim.orchestrator.readers.detections import (
 from sblsim.orchestrator.readers.fathom import no_det_desc
 from sblsim.orchestrator.readers.formats import FORMATS
 from sblsim.orchestrator.store.layout import LAYOUT, MARKER, STORE_FILE
-from sblsim.orchestrator.store.reading import FIRST_FATHOM_BYTES, Coded, NotUtf8, frames
+from sblsim.orchestrator.store.reading import FIRST_FATHOM_BYTES, Coded, NotUtf8, desc_line, frames
 
 #: The bytes of the file read as one piece [bytes] (reading a VUE export, a Fathom CSV or a GLATOS extract of a week
 #: peaked at 0.39-0.48 GiB with it, two pieces read at once while the one before them is written; 0.37-0.38 GiB with
@@ -175,7 +174,7 @@ def _write(path: Path, folder: Path, format: str, encoding: str, piece_bytes: in
     if not rows and format == "fathom":  # no DET record read: said as the whole-file reader says it
         with path.open("rb") as handle:
             head = handle.read(FIRST_FATHOM_BYTES).decode(encoding, errors="replace")
-        if not re.search(r'(?m)^[ "]*DET_DESC"?,', head):
+        if desc_line(head, "DET") is None:
             raise no_det_desc(head, str(path), _WHAT)
     if not rows:
         raise ModelError(f"{_WHAT}: {str(path)!r} holds a header and no detections")

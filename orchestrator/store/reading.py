@@ -139,13 +139,19 @@ def _last_line(text: str, starts: tuple[str, ...]) -> str | None:
     return text[best:end if end >= 0 else len(text)].rstrip("\r")
 
 
+def desc_line(text: str, record: str) -> str | None:
+    """The last ``<record>_DESC`` line of a Fathom CSV's ``text`` (its columns, comma-separated as Fathom writes
+    them; quoted or not), None where none is."""
+    return _last_line(text, (f"{record}_DESC,", f'"{record}_DESC",'))
+
+
 def _fathom_piece(head: str, descs: dict[str, str], text: str, line: int, name: str
                   ) -> tuple[list[str], pd.DataFrame, list[int]] | None:
     """A Fathom piece's ``DET`` (and ``DET_SENS``) tables under the ``_DESC`` lines in force (``descs``, updated
     from the piece), their rows numbered by the file's lines; None where no ``DET_DESC`` has come yet."""
     carried = [descs[record] for record in fathom.FATHOM_RECORDS if record in descs]
     for record in fathom.FATHOM_RECORDS:
-        found = _last_line(text, (f"{record}_DESC,", f'"{record}_DESC",'))
+        found = desc_line(text, record)
         if found is not None:
             descs[record] = found
     if "DET" not in descs:
@@ -277,4 +283,5 @@ def frames(path: Path, format: str, encoding: str, piece_bytes: int, digest, pro
                 waiting.cancel()
 
 
-__all__ = ["Coded", "FIRST_FATHOM_BYTES", "NotUtf8", "READING_THREADS", "coded_piece", "frames", "pieces"]
+__all__ = ["Coded", "FIRST_FATHOM_BYTES", "NotUtf8", "READING_THREADS", "coded_piece", "desc_line", "frames",
+           "pieces"]
