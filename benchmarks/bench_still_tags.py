@@ -108,7 +108,7 @@ def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float 
     rng = np.random.default_rng(seed)
     n = how.pings
     receivers, tag, _ = how.layout()
-    t = np.cumsum(rng.uniform(*how.interval, n))
+    t = _emissions(rng, how)
     c = 1480.0 + 5.0 * np.sin(2 * np.pi * t / 86400.0 + rng.uniform(0, 2 * np.pi))
     places = np.repeat(tag[None], n, axis=0)
     if move is not None:
@@ -131,10 +131,16 @@ def record(folder: Path, seed: int, move: np.ndarray | None = None, walk: float 
     return folder / "toa.txt", folder / "receivers.csv", places
 
 
+def _emissions(rng: np.random.Generator, how: Record) -> np.ndarray:
+    """A record's emission times (pings,) [s]: its intervals drawn uniform in ``how.interval``, the first draws of
+    its seed's generator."""
+    return np.cumsum(rng.uniform(*how.interval, how.pings))
+
+
 def pings(outcome, seed: int, how: Record = Record()) -> np.ndarray:
     """Each row of a tracked record's track: its ping (the record's emission nearest the row's time; a ping heard by
     too few receivers has no row)."""
-    t = np.cumsum(np.random.default_rng(seed).uniform(*how.interval, how.pings))  # record's first draws
+    t = _emissions(np.random.default_rng(seed), how)  # the record's first draws
     time = outcome.track["time"].to_numpy(float)
     after = np.clip(np.searchsorted(t, time), 1, len(t) - 1)
     return np.where(np.abs(t[after] - time) < np.abs(t[after - 1] - time), after, after - 1)

@@ -331,6 +331,12 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
     return StillVerdict(len(k), s2, first, bound, k, change, throughout, detectable, drifted)
 
 
+def _ramp(t: np.ndarray) -> np.ndarray:
+    """The times ``t`` (N,) [s] as a drift's ramp for :func:`step_statistics`: from 0 to 1 over the record (scaled
+    against rounding)."""
+    return (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
+
+
 def _drift(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, spread: np.ndarray, seen_at: float,
            level: float) -> int | None:
     """The first moved fix of a drift at a constant velocity from it to the record's end (:func:`step_statistics`
@@ -339,7 +345,7 @@ def _drift(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, spread: n
     fixes themselves (the median of the last quarter of those after the onset against that of those before it: over
     a long record a wander its slow errors' model does not hold fits a ramp whose way is none); None where none does.
     """
-    r = (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
+    r = _ramp(t)
     stats, rates = step_statistics(x, R, G, r)
     onsets = np.arange(MIN_SEGMENT, len(x) - MIN_SEGMENT + 1)
     way = rates[onsets] * (r[-1] - r[onsets - 1])[:, None]
@@ -370,7 +376,7 @@ def drift_onset(x: np.ndarray, R: np.ndarray, G: np.ndarray, t: np.ndarray, chan
     drifted : bool
         Whether a drift explains the fixes better than the step.
     """
-    r = (t - t[0]) / max(float(t[-1] - t[0]), 1e-9)
+    r = _ramp(t)
     best, onset, drifted = step - 2.0 * np.log(1.0 - STEP_LEVEL), change, False
     for ramp, last in ((r, len(x) - 2), (np.minimum(r, r[change]), change)):
         stats = step_statistics(x, R, G, ramp)[0][MIN_SEGMENT:last + 1]

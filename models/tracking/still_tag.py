@@ -10,7 +10,7 @@ receivers' jackknife shows beyond the fit's own covariance), and the verdict of 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -200,13 +200,26 @@ def explained_share(pooled, heard: np.ndarray) -> float:
     return float(np.mean(pooled.weights[heard] >= ROBUST_KEPT_WEIGHT)) if heard.any() else float("nan")
 
 
-def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma):
-    """One place of a still tag from the pings ``rows``: its pooled fit (the sound speed's change fitted beside it:
-    :func:`changing_track`), the consider terms and the receivers' term summed (dim, dim) [m²], the receivers'
-    term's DRMS [m], the survey's gains (:func:`survey_gains`), the speed's change fitted [m/s] (its least and
-    largest; None where the record is too short to fit it), the share of the arrivals the place explains
-    (:func:`explained_share`) and the rows' times of arrival less the speed's change (the consider terms and the
-    gains from one bias sensitivity, all on those)."""
+class _Place(NamedTuple):
+    """One place of a still tag (:func:`_place`): its pooled ``fit``, the consider terms and the receivers' term
+    summed ``consider`` (dim, dim) [m²], the receivers' term's DRMS ``spread`` [m], the survey's ``gains``
+    (:func:`survey_gains`), the speed's change fitted ``changed`` [m/s] (its least and largest; None where the record
+    is too short to fit it), the share of the arrivals the place explains ``explained`` (:func:`explained_share`)
+    and the rows' times of arrival less the speed's change ``corrected`` [s]."""
+
+    fit: Any
+    consider: np.ndarray
+    spread: float
+    gains: np.ndarray
+    changed: list | None
+    explained: float
+    corrected: np.ndarray
+
+
+def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock_sigma) -> _Place:
+    """One place of a still tag from the pings ``rows``: its pooled fit with the sound speed's change fitted beside
+    it (:func:`changing_track`), the consider terms and the gains from one bias sensitivity, all on the times of
+    arrival less the speed's change."""
     from sblsim.models.tracking.stationary import bias_sensitivity
 
     fitted = changing_track(toa[rows], positions, c, fixes[rows], sigma_toa)
@@ -218,8 +231,8 @@ def _place(toa, positions, c, fixes, rows, sigma_toa, survey, speed_sigma, clock
     spread = receivers_term(y, positions, c, pooled, sigma_toa)
     gains = survey_gains(y, positions, c, pooled, sigma_toa, S)
     beyond = _beyond(spread, pooled.covariance)  # what the jackknife sees beyond the fit's own covariance
-    return (pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
-            fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)), y)
+    return _Place(pooled, beyond + (0.0 if held is None else held), float(np.sqrt(np.trace(spread))), gains,
+                  fitted.speed_range(c) if fitted.knots else None, explained_share(pooled, np.isfinite(y)), y)
 
 
 def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma, sigma, last, first, drifted):
@@ -227,7 +240,7 @@ def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sig
     split (the first row at its second place; the rows between the two given to the place their arrivals fit,
     :func:`split_ping`, where it stepped; every one moved where it ``drifted``: its second place, the drift's mean,
     fits none of them), its first place from the rows before the split and its second from the rest (each
-    :func:`_place`'s tuple; the second None where too few receivers heard it there)."""
+    :class:`_Place`; the second None where too few receivers heard it there)."""
     rows = np.arange(len(toa))
     before = _place(toa, positions, c, fx, rows[:last + 1], sigma_toa, survey, speed_sigma, clock_sigma)
     split = last + 1
@@ -237,7 +250,7 @@ def _moved_once(toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sig
         except ModelError:  # too few receivers heard it after: the rows between flagged
             went = None
         if went is not None:
-            split += split_ping(toa[last + 1:first], positions, c, sigma, before[0].position, went)
+            split += split_ping(toa[last + 1:first], positions, c, sigma, before.fit.position, went)
     if split != last + 1:
         before = _place(toa, positions, c, fx, rows[:split], sigma_toa, survey, speed_sigma, clock_sigma)
     try:  # where it went: the pooled fit of the rows from the split
@@ -348,7 +361,8 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
         last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
         args = (toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma)
         split, before, gone = _moved_once(*args, sigma, last, first, verdict.drifted)
-        explained, places_tried = _two_places_explained(toa, split, before[5], None if gone is None else gone[5]), 2
+        explained = _two_places_explained(toa, split, before.explained, None if gone is None else gone.explained)
+        places_tried = 2
     # no one place (the still part's and where it went, where it moved): it moved the whole time where its fixes say
     # it moved or wander, else unchecked
     scattered = verdict.fixes >= UNCHECKED_BELOW and (not went or not throughout) and explained < MIN_EXPLAINED
@@ -364,7 +378,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                   "drift": verdict.drifted}
         after[split:] = True
         pooled, extra, spread, gains, changed, _, corrected = before
-        corrected = np.vstack([corrected, toa[split:] if gone is None else gone[6]])
+        corrected = np.vstack([corrected, toa[split:] if gone is None else gone.corrected])
         emissions[:], kept[:] = _rows(pooled, rows[:split], m)
         places[:split], own[:split], held[:split] = pooled.position, pooled.covariance, extra
         change["split_ping"] = split
@@ -372,12 +386,12 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
             change |= {"second_place": np.nanmedian(fx[split:], axis=0).tolist(), "second_place_sigma_m": None,
                        "second_place_explained_share": None}
         else:
-            moved_emissions, moved_kept = _rows(gone[0], rows[split:], m)
+            moved_emissions, moved_kept = _rows(gone.fit, rows[split:], m)
             emissions[split:], kept[split:] = moved_emissions[split:], moved_kept[split:]
-            places[split:], own[split:], held[split:] = gone[0].position, gone[0].covariance, gone[1]
-            change |= {"second_place": gone[0].position.tolist(),
-                       "second_place_sigma_m": float(np.sqrt(np.trace((gone[0].covariance + gone[1])[:2, :2]))),
-                       "second_place_explained_share": _number(gone[5])}
+            places[split:], own[split:], held[split:] = gone.fit.position, gone.fit.covariance, gone.consider
+            change |= {"second_place": gone.fit.position.tolist(),
+                       "second_place_sigma_m": float(np.sqrt(np.trace((gone.fit.covariance + gone.consider)[:2, :2]))),
+                       "second_place_explained_share": _number(gone.explained)}
         change["distance_m"] = float(np.linalg.norm(np.asarray(change["second_place"])[:2] - pooled.position[:2]))
     kp = np.flatnonzero(np.isfinite(emissions))
     if change is not None:

@@ -211,7 +211,6 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     schedule, seen = ping_schedule(toa, positions, settings, ping_type, burst_interval, burst_sequence)
     settings = replace(settings, interval=schedule.interval)
     interval = settings.interval
-    heard_count = np.isfinite(toa).sum(axis=1)
     stationary = motion == "stationary"
     if stationary:  # one position for all pings: no motion model, no filters
         motion_info: dict[str, Any] = {"model": "stationary", "acceleration_psd_m2_s3": None,
@@ -229,11 +228,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                    for name, kind in tt.CAUSAL_TRACKERS.items()
                    if name != "ekf" and other_filters}  # the EKF's record is the RTS's
     depth_known = None if depth is None else np.isfinite(depth)  # a measurement of each fix and row where given
-    trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), heard_count, fchi2, dim, depth_known)
-    # how far one reflection could move each fix unseen by its own test: a fix that far from a row refutes nothing
-    protection = np.where(depth_known if depth_known is not None else False, np.nan,
-                          protection_levels(positions, fx, fused, c, sigma))
-    fix_explained = qa.explained(toa, positions, fx, c, sigma)
+    trusted, protection, fix_explained = _fix_checks(toa, positions, c, sigma, (fx, fc, fused, fchi2), depth_known)
     columns = ["x", "y", "z"][:dim]
     frames, covariances, flagged = {}, {}, {}
     segment_starts = np.array([a for a, _ in schedule.segments()[1:]], int)
@@ -459,11 +454,23 @@ def _checked_against(corrected: np.ndarray | None, toa: np.ndarray, positions: n
     if corrected is None or np.array_equal(corrected, toa, equal_nan=True):
         return None
     fx, _, fc, used, chi2 = tt.fix_pings(corrected, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
-    known = None if depth is None else np.isfinite(depth)
-    trusted = qa.trusted_fixes(fx, fc, used.sum(axis=1), np.isfinite(corrected).sum(axis=1), chi2,
-                               positions.shape[1], known)
-    levels = np.where(known if known is not None else False, np.nan, protection_levels(positions, fx, used, c, sigma))
-    return corrected, fx, fc, trusted, qa.explained(corrected, positions, fx, c, sigma), levels
+    trusted, levels, agree = _fix_checks(corrected, positions, c, sigma, (fx, fc, used, chi2),
+                                         None if depth is None else np.isfinite(depth))
+    return corrected, fx, fc, trusted, agree, levels
+
+
+def _fix_checks(toa: np.ndarray, positions: np.ndarray, c: float, sigma: np.ndarray, fixes: tuple,
+                depth_known: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the rows are checked against of the single-ping fixes ``fixes`` (positions, covariances, arrivals used,
+    χ²) of ``toa`` (m, n) [s]: which are trusted (:func:`~sblsim.models.tracking.quality.trusted_fixes`), how far
+    one reflection could move each unseen by its own test (its protection level [m]: a fix that far from a row
+    refutes nothing; NaN where the depth was given) and the arrivals each explains."""
+    fx, fc, used, chi2 = fixes
+    trusted = qa.trusted_fixes(fx, fc, used.sum(axis=1), np.isfinite(toa).sum(axis=1), chi2, positions.shape[1],
+                               depth_known)
+    protection = np.where(depth_known if depth_known is not None else False, np.nan,
+                          protection_levels(positions, fx, used, c, sigma))
+    return trusted, protection, qa.explained(toa, positions, fx, c, sigma)
 
 
 def _set_aside_table(toa: np.ndarray, stray: np.ndarray, names: list[str], time_origin: float | None):
