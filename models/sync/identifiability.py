@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.survey_root import gauge_modes
 
 #: The largest posterior-over-prior σ [1] in a receiver's worst direction at which the arrivals determine its
 #: position: a posterior variance at most a quarter of the prior's, i.e. the arrivals' information at least three
@@ -120,13 +121,8 @@ def shape_sigma_ratio(xy: np.ndarray, covariance: np.ndarray, sigma: float | np.
     prior_sigma = np.broadcast_to(np.asarray(sigma, float), (n,))[inside]
     index = np.ravel(np.c_[2 * inside, 2 * inside + 1])
     P = covariance[np.ix_(index, index)]
-    centred = xy[inside] - xy[inside].mean(axis=0)
     m = len(inside)
-    H = np.zeros((2 * m, 4 if scale else 3))
-    H[0::2, 0] = H[1::2, 1] = 1.0
-    H[0::2, 2], H[1::2, 2] = -centred[:, 1], centred[:, 0]
-    if scale:
-        H[0::2, 3], H[1::2, 3] = centred[:, 0], centred[:, 1]
+    H = gauge_modes(xy[inside], scale)
     H /= np.maximum(np.linalg.norm(H, axis=0), 1e-300)
     Q, _ = np.linalg.qr(H)
     G = np.eye(2 * m) - Q @ Q.T

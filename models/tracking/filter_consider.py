@@ -35,15 +35,19 @@ BLOCK = 2048
 def _jacobians(receivers: np.ndarray, c: float, states: np.ndarray, survey: np.ndarray, sigma_c: float
                ) -> tuple[np.ndarray, np.ndarray]:
     """The arrivals' Jacobians at states (m, s) (NaN rows: zero): by the position and emission time (m, n, dim + 1),
-    and by the whitened parameters (m, n, n dim + 1: each receiver's axes, then the speed), for the receivers'
-    survey errors (n,) [m] and the speed's [m/s]."""
+    and by the whitened parameters (m, n, p + 1: the receivers' errors' p, then the speed), for the receivers'
+    survey errors (n,) [m] (p = n dim: each receiver's axes) or their square root (n dim, p) [m]
+    (:mod:`~sblsim.models.tracking.survey_root`) and the speed's [m/s]."""
     n, dim = receivers.shape
     finite = np.isfinite(states).all(axis=1)
     model, J = _evaluate_pings(receivers, c, np.where(finite[:, None], states[:, :dim], 0.0),
                                np.where(finite, states[:, -2], 0.0))
-    Ht = np.zeros((len(states), n, n * dim + 1))
+    Ht = np.zeros((len(states), n, _columns(survey, n, dim) + 1))
     for i in range(n):
-        Ht[:, i, i * dim:(i + 1) * dim] = -J[:, i, :dim] * survey[i]
+        if survey.ndim == 2:  # correlated: receiver i's axes' rows of the root
+            Ht[:, i, :-1] = -J[:, i, :dim] @ survey[i * dim:(i + 1) * dim]
+        else:
+            Ht[:, i, i * dim:(i + 1) * dim] = -J[:, i, :dim] * survey[i]
     Ht[:, :, -1] = -(model - np.where(finite, states[:, -2], 0.0)[:, None]) / c * sigma_c
     return J, Ht
 
@@ -63,22 +67,28 @@ def filter_sensitivity(record: TrackRecord, receivers: np.ndarray, c: float, sig
         The speed the filter ran at [m/s].
     sigma_toa : float or ndarray, (n,)
         A time of arrival's standard deviation [s], one or each receiver's (as the filter ran with).
-    survey_sigma : ndarray, (n,), or None
-        Each receiver's survey error per axis [m].
+    survey_sigma : ndarray, (n,) or (n dim, p), or None
+        Each receiver's survey error per axis [m], or the square root of the receivers' errors' covariance [m]
+        (:func:`~sblsim.models.tracking.survey_root.survey_root`: correlated errors).
     sigma_c : float or None
         The speed's standard error [m/s].
 
     Returns
     -------
-    ndarray, (m, s, n dim + 1)
+    ndarray, (m, s, n dim + 1) or (m, s, p + 1)
         ``S_k`` (module docstring) [m, m/s, s, s per unit of θ]; NaN before the filter's start.
     """
     receivers = np.asarray(receivers, float)
     m, size = record.x_filtered.shape
-    out = np.full((m, size, receivers.shape[0] * receivers.shape[1] + 1), np.nan)
+    out = np.full((m, size, _columns(survey_sigma, *receivers.shape) + 1), np.nan)
     for k, S in _recursion(record, receivers, c, sigma_toa, survey_sigma, sigma_c, 0, m, None):
         out[k] = S
     return out
+
+
+def _columns(survey: np.ndarray | None, n: int, dim: int) -> int:
+    """The receivers' whitened errors' count: n dim for a σ per receiver (or none), p for a root (n dim, p)."""
+    return n * dim if survey is None or np.ndim(survey) < 2 else int(np.shape(survey)[1])
 
 
 def _recursion(record: TrackRecord, receivers: np.ndarray, c: float, sigma_toa: float | np.ndarray,
@@ -90,6 +100,7 @@ def _recursion(record: TrackRecord, receivers: np.ndarray, c: float, sigma_toa: 
     n, dim = receivers.shape
     survey = np.zeros(n) if survey_sigma is None else np.asarray(survey_sigma, float)
     sc = float(sigma_c or 0.0)
+    q = _columns(survey, n, dim) + 1
     m, size = record.x_filtered.shape
     starts = {record.start, *record.restarts}
     R = np.asarray(sigma_toa, float) ** 2 if per_receiver(sigma_toa) else sigma_toa**2
@@ -111,8 +122,8 @@ def _recursion(record: TrackRecord, receivers: np.ndarray, c: float, sigma_toa: 
                 G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ (Ht / R[used][:, None])  # the fix's (dim + 1, θ)
             else:
                 G = -record.P_filtered[k][np.ix_(idx, idx)] @ J.T @ Ht / R
-            interval = np.zeros(n * dim + 1) if S is None else (record.F[k] @ S)[-1]
-            S = np.zeros((size, n * dim + 1))
+            interval = np.zeros(q) if S is None else (record.F[k] @ S)[-1]
+            S = np.zeros((size, q))
             S[:dim], S[-2], S[-1] = G[:dim], G[dim], interval
         elif S is not None:
             S = record.F[k] @ S
@@ -183,7 +194,7 @@ def consider_terms_along(record: TrackRecord, receivers: np.ndarray, c: float, s
     receivers = np.asarray(receivers, float)
     rows = np.asarray(rows, int)
     m, size = record.x_filtered.shape
-    p = receivers.shape[0] * receivers.shape[1] + 1
+    p = _columns(survey_sigma, *receivers.shape) + 1
     args = (record, receivers, c, sigma_toa, survey_sigma, sigma_c)
 
     def block(a: int, b: int) -> np.ndarray:  # the filter's sensitivity of pings a to b (NaN before the start)

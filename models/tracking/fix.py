@@ -233,8 +233,9 @@ def survey_fix_covariance(receivers: np.ndarray, c: float, sigma_toa: float, pos
         [s], as the fixes were made with.
     positions, emissions, covariances, used : ndarray
         What :func:`fix_pings` returned: (m, dim) [m], (m,) [s], (m, dim + 1, dim + 1), (m, n).
-    survey_sigma : ndarray, (n,)
-        Each receiver's survey error per axis [m].
+    survey_sigma : ndarray, (n,) or (n dim, p)
+        Each receiver's survey error per axis [m], or the square root of the receivers' errors' covariance [m]
+        (:func:`~sblsim.models.tracking.survey_root.survey_root`: correlated errors).
 
     Returns
     -------
@@ -293,10 +294,14 @@ def _survey_term(cov: np.ndarray, J: np.ndarray, used: np.ndarray, sigma_toa: fl
     """The fixes' consider covariance of the receivers' survey error (:func:`fix_pings`): ``Σ_i σ_i² S_i S_iᵀ``,
     ``S_i = C J_iᵀ J_p,i / σ_toa²`` (k, dim + 1, dim + 1) for the fixes' covariances C (k, dim + 1, dim + 1), their
     arrivals' rows J (k, n, dim + 1), the arrivals used (k, n) and the survey errors (n,) [m] (``σ_toa`` one, or
-    each receiver's (n,))."""
+    each receiver's (n,)); given their square root L (n dim, p) [m] instead (correlated errors,
+    :mod:`~sblsim.models.tracking.survey_root`), ``T Tᵀ`` with ``T = Σ_(i,a) S_(i,a) L_(i a)``."""
     G = np.einsum("kab,knb->kna", np.nan_to_num(cov), J * used[:, :, None])  # C J_iᵀ: (k, n, d+1)
     G = G / np.asarray(sigma_toa, float)[None, :, None] ** 2 if per_receiver(sigma_toa) else G / sigma_toa**2
     S = G[:, :, :, None] * J[:, :, None, :dim]  # (k, n, dim + 1, dim)
+    if survey.ndim == 2:
+        T = np.einsum("knab,nbp->kap", S, survey.reshape(S.shape[1], dim, -1))
+        return np.einsum("kap,kcp->kac", T, T)
     return np.einsum("n,knab,kncb->kac", survey**2, S, S)
 
 

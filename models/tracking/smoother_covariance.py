@@ -101,10 +101,21 @@ def _survey_covariance(problem: _Problem, D: dict, B: dict, information: np.ndar
     same at every ping, moves the whole track by ``δx = −N⁻¹ (∂g/∂r_i) δr_i`` (N the cost's Hessian of the
     covariance, ``D``, ``B``; g its gradient, whose arrivals from receiver i change with r_i as their normalised
     residuals do, ``∂z/∂r_i = −∂z/∂p``), so each axis a adds ``σ_i² S S_kᵀ`` per ping with ``S = N⁻¹ u_(i,a)``:
-    one banded solve per receiver and axis."""
+    one banded solve per receiver and axis. Given the errors' square root L (n dim, p) instead of their σ (n,)
+    (:mod:`~sblsim.models.tracking.survey_root`: correlated errors), ``δr = L θ``: one solve per column of L, of
+    ``u_j = Σ_(i,a) L_(i a, j) u_(i,a)``, adding ``S_j S_jᵀ``."""
     P, dim = problem, problem.dim
     cols = list(range(dim)) + [P.s - 2]
     out = np.zeros((P.m, P.s, P.s))
+    if survey.ndim == 2:
+        for j in range(survey.shape[1]):
+            along = sum(Jz[:, a] * survey[P.i * dim + a, j] for a in range(dim))  # each arrival's receiver's δr
+            u = np.zeros((P.m, P.s))
+            for x, col in enumerate(cols):
+                u[:, col] = np.bincount(P.k, weights=-information * Jz[:, x] * along, minlength=P.m)
+            S = _banded_solve(problem, _given_system(D, B, u), 1e-12)
+            out += S[:, :, None] * S[:, None, :]
+        return out
     for i in np.flatnonzero(survey > 0):
         mine = P.i == i
         for a in range(dim):
@@ -131,7 +142,8 @@ def survey_covariance(toa: np.ndarray, receivers: np.ndarray, settings: TrackerS
     receivers : ndarray, (n, dim)
         [m].
     settings : TrackerSettings
-        With ``survey_sigma`` (n,) [m] (None: a zero term).
+        With ``survey_sigma`` (n,) [m], or the square root (n dim, p) [m] of correlated errors
+        (:func:`~sblsim.models.tracking.survey_root.survey_root`) (None: a zero term).
     X : ndarray, (m, 2 dim + 2)
         The track's states (:class:`~sblsim.models.tracking.smoother.RobustTrack` ``x``).
     schedule, depth, dof

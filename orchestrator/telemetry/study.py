@@ -305,10 +305,11 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     if rounded:
         notes.append(rounded)
 
-    def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None) -> StudyOutcome:
+    def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None, errors=None) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``; ``survey``
         each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
-        track (else the stated survey's)."""
+        track (else the stated survey's); ``errors`` their joint covariance (names, (2R, 2R) [m²]: refined together)
+        in each moving tag's consider terms."""
         scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
                                                                series, bin_hours, notes, scored, not refine_positions,
@@ -374,6 +375,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                "motion": spec.motion, "crs": frame_crs, "time_origin": matrix.origin,
                                "other_filters": False, "toa_sigma": toa_sigma, "water_depth": water_depth,
                                "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
+                    if errors is not None and spec.motion != "stationary":  # refined together: correlated errors
+                        options["survey_covariance"] = errors
                     if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                         options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                     np.isfinite(matrix.toa).any(axis=0))
@@ -453,7 +456,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)
     outcome = attempt(deployments, assigned, list(notes), workdir)
     if refine_positions:
-        outcome = refined_study(outcome, lambda d, a, q: attempt(d, a, list(notes), workdir / REFINED_FOLDER, q),
+        outcome = refined_study(outcome, lambda d, a, q, e: attempt(d, a, list(notes), workdir / REFINED_FOLDER, q,
+                                                                    e),
                                 deployments, assigned, SURVEY_SIGMA if survey_sigma is None else survey_sigma,
                                 workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun

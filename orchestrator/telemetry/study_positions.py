@@ -29,6 +29,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
+from sblsim.models.tracking.survey_root import frame_conditioned
 from sblsim.orchestrator.sync.taken_survey import position_errors
 
 #: The rounds at most of a refinement (each: the study made again on the positions, its clocks synchronised on
@@ -57,10 +58,20 @@ class StudyRefinement:
     summary : dict
         ``study.json``'s ``positions``: what was fitted, the held-out check, and (after :func:`verdict`) the reference
         and sync tags' errors on both arrays and whether the refined one was kept.
+    covariance : numpy.ndarray or None
+        (2R, 2R) [m²] the receivers' horizontal position errors (x then y, in ``positions``' order) in the survey's
+        frame (:func:`~sblsim.models.tracking.survey_root.frame_conditioned` of the fit's): the moving tags' consider
+        terms on the refined positions take them, correlated as the fit made them.
     """
 
     positions: pd.DataFrame
     summary: dict[str, Any]
+    covariance: np.ndarray | None = None
+
+    def errors(self) -> tuple[list[str], np.ndarray] | None:
+        """The receivers' names and :attr:`covariance`, as a track takes them (``survey_covariance``)."""
+        return None if self.covariance is None else (self.positions["receiver"].astype(str).tolist(),
+                                                      self.covariance)
 
     @property
     def helps(self) -> bool:
@@ -231,7 +242,7 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
         "converged": fit.converged, "iterations": fit.iterations,
         "held_out": held,
         "gauge": "a translation or a rotation of the whole array changes no time of arrival: the survey's kept"}
-    return StudyRefinement(positions, summary)
+    return StudyRefinement(positions, summary, frame_conditioned(receivers[:, :2], cov, scale=speed is not None))
 
 
 def _errors(references: dict[str, Any] | None) -> dict[str, float | None]:
@@ -295,8 +306,9 @@ def sync_positions(positions: pd.DataFrame, survey_sigma: float) -> pd.DataFrame
 def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma: float, workdir: Path,
                   tags_folder: str):
     """A study (:class:`~sblsim.orchestrator.telemetry.study.StudyOutcome`) made again by ``again(deployments,
-    assigned, sigmas)`` (into ``workdir``'s :data:`REFINED_FOLDER`; ``sigmas`` each receiver's position's error,
-    :func:`position_sigmas`) on the receivers' positions refined from its moving tags
+    assigned, sigmas, errors)`` (into ``workdir``'s :data:`REFINED_FOLDER`; ``sigmas`` each receiver's position's
+    error, :func:`position_sigmas`; ``errors`` their joint covariance, :meth:`StudyRefinement.errors`) on the
+    receivers' positions refined from its moving tags
     where the held-out pings say it helps, in rounds, and kept where its reference and left-out sync tags are not
     worse (the module docstring); its tags' folders (``tags_folder``) moved over the first study's where kept. The
     study returned says what was done (``summary["positions"]``; ``positions``: ``positions.csv``)."""
@@ -325,7 +337,8 @@ def refined_study(outcome, again: Callable, deployments, assigned, survey_sigma:
     while True:
         shutil.rmtree(workdir / REFINED_FOLDER, ignore_errors=True)
         second = again(*refinement.deployments(deployments, assigned), position_sigmas(refinement.positions,
-                                                                                     survey_sigma))
+                                                                                     survey_sigma),
+                       refinement.errors())
         rounds.append({"median_shift_m": refinement.summary["median_shift_m"],
                        "largest_shift_m": refinement.summary["largest_shift_m"]})
         if len(rounds) == ROUNDS:

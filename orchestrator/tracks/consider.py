@@ -24,4 +24,18 @@ def survey_sigmas(receivers, names: Sequence[str], one: float | None) -> np.ndar
     return None if not np.isfinite(given).any() else np.nan_to_num(given)
 
 
-__all__ = ["survey_sigmas"]
+def survey_considered(survey: np.ndarray | None, names: Sequence[str], dim: int,
+                      covariance: tuple[Sequence[str], np.ndarray] | None) -> np.ndarray | None:
+    """What the consider terms take of the used receivers' (``names``) survey errors: their σ ``survey`` (n,) [m], or
+    where ``covariance`` (names and their horizontal covariance (2N, 2N) [m²]: positions refined together) covers any,
+    the square root of their errors' covariance (n dim, p) [m]
+    (:func:`~sblsim.models.tracking.survey_root.taken_for`)."""
+    if covariance is None:
+        return survey
+    from sblsim.models.tracking.survey_root import taken_for
+
+    root = taken_for(names, np.zeros(len(names)) if survey is None else survey, dim, covariance)
+    return survey if root is None else root
+
+
+__all__ = ["survey_considered", "survey_sigmas"]

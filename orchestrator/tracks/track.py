@@ -38,7 +38,7 @@ from sblsim.models.tracking.strays import SET_ASIDE_REASON
 from sblsim.orchestrator.io.frames import frame_summary
 from sblsim.orchestrator.io.times import iso_utc
 from sblsim.orchestrator.tracks.bound import BOUND_COLUMNS, bound_along_track, bound_thirds
-from sblsim.orchestrator.tracks.consider import _plus, survey_sigmas
+from sblsim.orchestrator.tracks.consider import _plus, survey_considered, survey_sigmas
 from sblsim.orchestrator.tracks.depth import (
     check_water_depth,
     depth_term,
@@ -96,12 +96,15 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
           time_origin: float | None = None, other_filters: bool = True, toa_sigma: float | None = None,
           temperature_path: Path | None = None, water_depth: float | None = None,
-          force_interval: bool = False) -> TrackOutcome:
+          force_interval: bool = False, survey_covariance: tuple[Sequence[str], np.ndarray] | None = None
+          ) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
     ``fixed_depth`` and ``depth_sigma``; the receivers' survey error as
-    :func:`~sblsim.orchestrator.tracks.consider.survey_sigmas` takes ``survey_sigma``; ``truth_sigma`` [m] the truth's
+    :func:`~sblsim.orchestrator.tracks.consider.survey_sigmas` takes ``survey_sigma``, the moving tag's consider terms
+    its receivers' correlated errors where ``survey_covariance`` gives them (names, (2N, 2N) [m²]: positions refined
+    together, :func:`~sblsim.orchestrator.tracks.consider.survey_considered`); ``truth_sigma`` [m] the truth's
     own error per horizontal axis in the NEES (:func:`~sblsim.orchestrator.tracks.scoring.score`);
     ``ping_type``, ``burst_interval`` as :func:`~sblsim.orchestrator.tracks.tracker.ping_schedule`,
     ``burst_sequence_path`` the file of a ``pbi`` tag's intervals
@@ -171,6 +174,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         depth, depth_sigma, depth_info = np.full(len(toa), plane.depth), plane.sigma, prior_info(plane, positions,
                                                                                                    water_depth)
     survey = survey_sigmas(receivers, names, survey_sigma)
+    considered_survey = survey_considered(survey, names, dim, survey_covariance)  # correlated where refined together
     # each receiver's clock offset's own uncertainty from the synchronisation (receivers.csv's clock_sigma_s): a
     # still tag's consider term
     clock_sigma = None if receivers.clock_sigma is None else \
@@ -303,7 +307,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         # the filters' and the RTS smoother's consider terms of the same survey and speed errors, a block of pings
         # at a time (the sensitivity, (pings, states, receivers × dim + 1) numbers, is never made whole)
         considered = survey is not None or bool(speed_sigma)
-        terms, smoothed = consider_terms_along(record, positions, c, sigma, k, survey, speed_sigma, smooth) \
+        terms, smoothed = consider_terms_along(record, positions, c, sigma, k, considered_survey, speed_sigma, smooth) \
             if considered else (None, None)
         if smooth:
             xs, Ps = tracker.smooth(record)
@@ -314,7 +318,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 kr = np.arange(k0, len(toa))
                 # the survey's error and the speed's (calibrated or fallen back to: its error in every range)
                 extra = None if survey is None and not speed_sigma else consider_covariance(
-                    toa[k0:], positions, replace(settings, survey_sigma=survey), robust.x, speed_sigma,
+                    toa[k0:], positions, replace(settings, survey_sigma=considered_survey), robust.x, speed_sigma,
                     schedule.sliced(k0), None if depth is None else depth[k0:])[:, :dim, :dim]
                 extra = _plus(extra, depth_term(prior, robust.P[:, :dim, :dim]))
                 rows("robust", kr, robust.x[:, -2], robust.x[:, :dim], robust.P[:, :dim, :dim],
@@ -328,10 +332,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             u = np.flatnonzero(other.used.any(axis=1) & np.isfinite(other.x_filtered[:, 0]))
             rows(name, u, other.x_filtered[u, -2], other.x_filtered[u, :dim], other.P_filtered[u][:, :dim, :dim],
                  other.used[u].sum(axis=1), np.r_[other.restarts, segment_starts],
-                 consider_terms_along(other, positions, c, sigma, u, survey, speed_sigma)[0] if considered else None)
+                 consider_terms_along(other, positions, c, sigma, u, considered_survey, speed_sigma)[0]
+                 if considered else None)
     f = np.flatnonzero(np.isfinite(fe))
     fix_extra = _plus(None if survey is None else survey_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f],
-                                                                        fused[f], survey)[:, :dim, :dim],
+                                                                        fused[f], considered_survey)[:, :dim, :dim],
                       depth_term(prior, fc[f][:, :dim, :dim]))
     if speed_sigma:
         fix_extra = _plus(fix_extra, speed_fix_covariance(positions, c, sigma, fx[f], fe[f], fc[f], fused[f],
@@ -379,6 +384,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "ping_interval_s": interval,
         "motion": motion_info, "depth": depth_info,
         "survey_sigma_m": None if survey is None else dict(zip(names, map(float, survey))),
+        "survey_correlated": considered_survey is not survey,  # the refined positions' joint errors considered
         "clock_sigma_s": None if clock_sigma is None else {n: None if np.isnan(v) else float(v)
                                                            for n, v in zip(names, clock_sigma)},
         "ping_type": {"type": schedule.kind, "source": schedule.source,
