@@ -8,6 +8,8 @@ from typing import Sequence
 
 import numpy as np
 
+from sblsim.models.tracking.survey_root import taken_for
+
 
 def _plus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     """Two terms of a reported covariance summed, either None (absent)."""
@@ -32,8 +34,6 @@ def survey_considered(survey: np.ndarray | None, names: Sequence[str], dim: int,
     (:func:`~sblsim.models.tracking.survey_root.taken_for`)."""
     if covariance is None:
         return survey
-    from sblsim.models.tracking.survey_root import taken_for
-
     root = taken_for(names, np.zeros(len(names)) if survey is None else survey, dim, covariance)
     return survey if root is None else root
 
