@@ -127,10 +127,4 @@ def taken_for(names: Sequence[str], sigma: np.ndarray, dim: int,
     return survey_root(sigma, dim, horizontal)
 
 
-def per_receiver_sigma(root: np.ndarray, dim: int) -> np.ndarray:
-    """Each receiver's σ per axis [m] (n,) of a square root (n dim, p): the root mean square of its axes' σ."""
-    variance = np.sum(np.asarray(root, float) ** 2, axis=1).reshape(-1, dim)
-    return np.sqrt(variance.mean(axis=1))
-
-
-__all__ = ["RELATIVE_FLOOR", "frame_conditioned", "gauge_modes", "per_receiver_sigma", "survey_root", "taken_for"]
+__all__ = ["RELATIVE_FLOOR", "frame_conditioned", "gauge_modes", "survey_root", "taken_for"]

@@ -242,7 +242,11 @@ def refine_study(outcomes: dict[str, Any], matrices: dict[str, Any], moving: lis
         "converged": fit.converged, "iterations": fit.iterations,
         "held_out": held,
         "gauge": "a translation or a rotation of the whole array changes no time of arrival: the survey's kept"}
-    return StudyRefinement(positions, summary, frame_conditioned(receivers[:, :2], cov, scale=speed is not None))
+    try:  # the errors in the survey's frame, for the moving tags' consider terms (none: each one's σ alone)
+        framed = frame_conditioned(receivers[:, :2], cov, scale=speed is not None)
+    except ModelError:  # the array's gauge without variance (receivers at one place)
+        framed = None
+    return StudyRefinement(positions, summary, framed)
 
 
 def _errors(references: dict[str, Any] | None) -> dict[str, float | None]:
