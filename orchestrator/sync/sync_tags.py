@@ -17,6 +17,7 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clocks import Geometry, fit_clocks
 from sblsim.models.sync.emissions import connected
+from sblsim.models.sync.mean_offset import mean_offset_sigma
 from sblsim.models.sync.positions import AMBIGUOUS, FAILED, UNCHECKED, position_emissions
 from sblsim.models.sync.scale import SPEED_TOLERANCE
 from sblsim.models.sync.season import clocks_in_windows
@@ -136,7 +137,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             found = k < len(ems)
             found[found] = ems[k[found]] == emission[at_home[found]]
             arrival[k[found], home] = time[at_home[found]] - this.offset(c[at_home[found]], time[at_home[found]])
-            rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white, offset_sigma,
+            held = _averaged_clocks(fit, knot_sigma, offset_sigma, receiver[own], time[own])
+            rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white, held,
                                          survey, truth, truth_cov, home))
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
@@ -152,6 +154,20 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     columns += ["fixes_unchecked", "fixes_failed", "fixes_ambiguous", "fixes_scaled", "arrivals_rejected",
                 "median_redundancy", *PLACE_COLUMNS]
     return pd.DataFrame(rows, columns=columns)
+
+
+def _averaged_clocks(fit: ClockFit, knot_sigma: np.ndarray, each: np.ndarray, receiver: np.ndarray,
+                     time: np.ndarray) -> np.ndarray:
+    """Each receiver's clock offset error (R,) [s] averaged over a still tag's arrivals at it (``receiver`` (n,),
+    ``time`` (n,) [s] on the fit's base: :func:`~sblsim.models.sync.mean_offset.mean_offset_sigma` of its edges'
+    ``knot_sigma`` (R, K + 1) and its bins' drifts' σ), the bias its pooled place takes of it; ``each`` (R,) [s]
+    (one edge's) where its clock broke (a row per segment) or the tag has no arrival there."""
+    out = np.array(each, float)
+    if fit.site is not None:
+        return out
+    for j in np.unique(receiver):
+        out[j] = mean_offset_sigma(knot_sigma[j], fit.drift_sigma[j], fit.edges, time[receiver == j])
+    return out
 
 
 def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray, clock: np.ndarray,

@@ -316,12 +316,12 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     [0.75, 2.25]: NEES in [1.5, 4.5]; measured 2.05, each seed 1.78 to 2.44), and the fixes' errors against the
     simulated positions recomputed here agree with the table's median error. Each tag's one
     place (``place_*``, every tag: inside the array or not) is never flagged as moved, its error is its distance
-    from the simulated position (recomputed here), and its σ holds (mean NEES at most 4.5) but is conservative: the
-    still tag's consider terms take each receiver's clock offset error as independent of the others' (the sync's
-    offsets share the reference receiver's, which the emission times absorb) and add the receivers' jackknife
-    where it exceeds the fit's own covariance, which sees those offsets' errors too; measured 0.99 (each seed 0.54
-    to 1.53; 0.77 with the jackknife added whole): held within [0.5, 4.5] here (σ at most twice the consistent
-    one)."""
+    from the simulated position (recomputed here), and its σ holds (mean NEES at most 4.5), on the large side: its
+    clock term is each receiver's offset error averaged over the tag's arrivals (the edges' errors partly average
+    out: models/sync/mean_offset.py), but taken as independent of the other receivers' (the sync's offsets share
+    the reference receiver's, which the emission times absorb); measured 1.49 (each seed 0.81 to 2.35; 0.99 with
+    one edge's error for the whole record, 0.77 with the receivers' jackknife added whole too): held within
+    [1.0, 4.5] here (σ at most √2 times the consistent one; 0.99 fails)."""
     from sblsim.orchestrator.readers.detections import Detections
     from sblsim.orchestrator.sync.run import synchronise
 
@@ -347,7 +347,7 @@ def test_the_sync_tags_fixes_are_consistent_over_20_simulated_seeds():
     print(f"simulated sync tags' NEES inside the array over 20 seeds: {np.mean(means):.2f} (seeds {min(means):.2f} "
           f"to {max(means):.2f}); each as one place: {np.mean(places):.2f} ({min(places):.2f} to {max(places):.2f})")
     assert 1.5 <= np.mean(means) <= 4.5, means
-    assert 0.5 <= np.mean(places) <= 4.5, places
+    assert 1.0 <= np.mean(places) <= 4.5, places
 
 
 @pytest.mark.slow
