@@ -67,6 +67,29 @@ class Clocks:
     #: Where a receiver's time went back in the detections file's order (``offsets.csv``'s ``clock_part``): (rows,)
     #: the clock part each segment holds for (1 first); None: every segment part 1.
     parts: np.ndarray | None = None
+    #: Each receiver's offset's σ at each edge (R, K+1) [s] and its drift's σ in each bin (R, K) [s/s]
+    #: (``offsets.csv``'s ``offset_start_sigma_s``, ``offset_end_sigma_s``, ``drift_sigma``; NaN where not
+    #: computed), for a still tag's clock term averaged over its arrivals (:meth:`averaged_sigma`); None where the
+    #: file has none, or a clock broke (a row per segment).
+    knot_sigma: np.ndarray | None = None
+    drift_sigma: np.ndarray | None = None
+
+    def averaged_sigma(self, rows: list[int], times: np.ndarray) -> np.ndarray | None:
+        """Each of ``rows``' (receivers of :attr:`knots`) offset error averaged over a tag's arrivals at it,
+        ``times`` (pings, len(rows)) [s since 1970 UTC] (NaN: not heard): the bias a still tag's pooled pings share
+        (:func:`~sblsim.models.sync.mean_offset.mean_offset_sigma`), [s]; a receiver with an edge its arrivals lean
+        on without a σ keeps :attr:`clock_sigma`'s. None without both."""
+        if self.clock_sigma is None or self.knot_sigma is None:
+            return None if self.clock_sigma is None else self.clock_sigma[rows]
+        from sblsim.models.sync.mean_offset import edge_weights, mean_offset_sigma
+
+        out = np.array(self.clock_sigma[rows], float)
+        for k, row in enumerate(rows):
+            heard = times[np.isfinite(times[:, k]), k]
+            leaned = edge_weights(heard, self.edges) > 0
+            if len(heard) and np.isfinite(self.knot_sigma[row][leaned]).all():
+                out[k] = mean_offset_sigma(self.knot_sigma[row], self.drift_sigma[row], self.edges, heard)
+        return out
 
     def reference(self) -> str | None:
         """The reference receiver: the one whose clock the synchronisation took as the time base (its offset 0 at
@@ -105,7 +128,9 @@ def read_clocks(folder: Path | str) -> Clocks:
     """Read ``offsets.csv`` of a synchronisation's folder (``receiver``, ``bin``, ``start``, ``end``,
     ``offset_start_s``, ``offset_end_s``, and where it has one ``toa_sigma_s``, a receiver's timing noise [s] in
     :data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`, the same on each of its rows, and ``clock_sigma_s``,
-    its clock offset's own uncertainty [s] in [0, 1], likewise; other columns ignored).
+    its clock offset's own uncertainty [s] in [0, 1], likewise; ``offset_start_sigma_s``, ``offset_end_sigma_s``
+    [s] and ``drift_sigma`` [s/s] where it has all three, each offset's and drift's σ (empty: not computed); other
+    columns ignored).
 
     Raises
     ------
@@ -125,7 +150,7 @@ def read_clocks(folder: Path | str) -> Clocks:
     body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
                                                    "offset_end_s"), "sblsim sync's offsets.csv",
                                       ("toa_sigma_s", "clock_sigma_s", "segment", "clock_from", "clock_to",
-                                       "clock_part"))
+                                       "clock_part", "offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"))
     receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
                         "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
     bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
@@ -145,6 +170,11 @@ def read_clocks(folder: Path | str) -> Clocks:
     if "clock_sigma_s" in col:  # (0 at the reference receiver)
         clock_sigma = _numbers(body[col["clock_sigma_s"]], what, name, lines, "clock_sigma_s", *CLOCK_SIGMA_RANGE,
                                unit="s")
+    spread = None
+    if {"offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"} <= set(col):  # (a folder before them: none)
+        spread = tuple(_numbers(body[col[c]], what, name, lines, c, 0.0, high, missing=True, unit=unit)
+                       for c, high, unit in (("offset_start_sigma_s", MAX_OFFSET, "s"),
+                                             ("offset_end_sigma_s", MAX_OFFSET, "s"), ("drift_sigma", 1.0, "s/s")))
     parts = None
     if "segment" in col:  # a receiver's clock broke: its segments' rows, each with the times it holds for
         if not {"clock_from", "clock_to"} <= set(col):
@@ -164,7 +194,8 @@ def read_clocks(folder: Path | str) -> Clocks:
                 raise ModelError(f"{what}: {name!r} line {lines[k]} column clock_part: {clock_part[k]:g} is not "
                                  "allowed; allowed: a whole number from 1")
             parts = (*parts, clock_part)
-    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}", noise, parts, clock_sigma)
+    return clocks_of(receiver, bins, start, end, first, last, f"{what}: {name!r}", noise, parts, clock_sigma,
+                     spread)
 
 
 def _in_folder(folder: Path, name: str) -> Path:
@@ -185,7 +216,10 @@ def offsets_clocks(offsets: pd.DataFrame) -> Clocks:
                      offsets["toa_sigma_s"].to_numpy(float) if "toa_sigma_s" in offsets else None,
                      tuple(offsets[c].to_numpy(float) for c in ("segment", "clock_from", "clock_to", "clock_part")
                            if c in offsets) if "segment" in offsets else None,
-                     offsets["clock_sigma_s"].to_numpy(float) if "clock_sigma_s" in offsets else None)
+                     offsets["clock_sigma_s"].to_numpy(float) if "clock_sigma_s" in offsets else None,
+                     tuple(offsets[c].to_numpy(float) for c in ("offset_start_sigma_s", "offset_end_sigma_s",
+                                                                  "drift_sigma"))
+                     if {"offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"} <= set(offsets) else None)
 
 
 def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
@@ -197,13 +231,15 @@ def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
 def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np.ndarray, first: np.ndarray,
               last: np.ndarray, where: str, toa_sigma: np.ndarray | None = None,
               segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-              clock_sigma: np.ndarray | None = None) -> Clocks:
+              clock_sigma: np.ndarray | None = None,
+              spread: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Clocks:
     """Each receiver's offsets at the bins' edges from one row per receiver and bin (``offsets.csv``'s columns), and
     its timing noise where ``toa_sigma`` (one per row [s]) is given, its clock offset's uncertainty where
     ``clock_sigma`` (one per row [s]) is; where ``segments`` (``segment``, ``clock_from``,
     ``clock_to`` per row: a clock broke; and ``clock_part`` where its time went back in the detections' order) is
     given, one set of rows per receiver and segment, each segment holding for its receiver's own times from
-    ``clock_from`` to ``clock_to`` (NaN: open) in its part.
+    ``clock_from`` to ``clock_to`` (NaN: open) in its part; ``spread`` the rows' offsets' σ at their start and end
+    and their drift's σ (:attr:`Clocks.knot_sigma`, kept where no clock broke).
 
     Raises
     ------
@@ -246,7 +282,14 @@ def clocks_of(receiver: np.ndarray, bins: np.ndarray, start: np.ndarray, end: np
     noise = None if toa_sigma is None else _one_per_row(toa_sigma, names, j, "toa_sigma_s", where)
     offset_sigma = None if clock_sigma is None else _one_per_row(clock_sigma, names, j, "clock_sigma_s", where)
     if segments is None:
-        return Clocks(names, edges, knots, noise, offset_sigma)
+        clocks = Clocks(names, edges, knots, noise, offset_sigma)
+        if spread is not None:
+            clocks.knot_sigma = np.full(knots.shape, np.nan)
+            clocks.knot_sigma[j, b] = spread[0]
+            clocks.knot_sigma[j, b + 1] = spread[1]
+            clocks.drift_sigma = np.full((len(names), n_bins), np.nan)
+            clocks.drift_sigma[j, b] = spread[2]
+        return clocks
     clocks = _segmented(names, j, owner_names, segments, edges, knots, noise, where)
     if offset_sigma is not None:  # per receiver (every segment's the receiver's own)
         clocks.clock_sigma = np.full(len(clocks.receivers), np.nan)

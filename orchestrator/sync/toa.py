@@ -267,7 +267,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         "wall_time_s": clock.perf_counter() - started}
     noise = None if clocks.toa_sigma is None else clocks.toa_sigma[[synced[n] for n in columns]]
     summary["toa_sigma_s"] = None if noise is None else {n: float(v) for n, v in zip(columns, noise)}
-    offset_sigma = None if clocks.clock_sigma is None else clocks.clock_sigma[[synced[n] for n in columns]]
+    # each receiver's clock offset's error averaged over this tag's arrivals at it (a still tag's pooled bias)
+    offset_sigma = clocks.averaged_sigma([synced[n] for n in columns], toa)
     return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
                       clock_sigma=offset_sigma)
 

@@ -38,6 +38,7 @@ def synchronised(tmp_path_factory):
     sblsim.toa(files["detections"], receivers=files["deployments"], sync=folder / "sync", tag=tag,
                out=folder / "toa")
     matrix = folder / "toa" / "toa.txt"
+    (folder / "toa_whole.txt").write_text(matrix.read_text())  # (the tag's every ping, for the clock term)
     matrix.write_text("".join(matrix.read_text().splitlines(keepends=True)[:PINGS]))
     return sim, files, result, folder, tag
 
@@ -145,7 +146,11 @@ def test_a_receivers_files_noise_outside_its_range_is_refused(synchronised, tmp_
 def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
     """``offsets.csv``'s ``clock_sigma_s`` is each receiver's offsets' own RMS sigma (``toa_noise``'s ``clock_s``,
     the same on every row of the receiver; 0 at the reference), within its ``toa_sigma_s`` (the two in quadrature
-    with the residuals' part), and the matrix's ``receivers.csv`` carries it for the stationary fix's clock term."""
+    with the residuals' part); the matrix's ``receivers.csv`` carries, for the stationary fix's clock term, each
+    receiver's offset error averaged over the tag's arrivals at it: ``√(aᵀ C a)``, ``a`` the arrivals' mean weights
+    on the bins' edges and C the edges' covariance from ``offsets.csv``'s sigmas (neighbours' from the drift's σ,
+    farther ones the product of the correlations between: written out densely here), below the RMS of the edges'
+    sigmas it leans on."""
     _, _, result, folder, _ = synchronised
     offsets = pd.read_csv(folder / "sync" / "offsets.csv", dtype={"receiver": str})
     per_receiver = offsets.groupby("receiver")
@@ -157,4 +162,23 @@ def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
     np.testing.assert_allclose(first["toa_sigma_s"], np.hypot(parts, clock), rtol=1e-9)
     assert (clock == 0).sum() == 1 and (clock[clock > 0] < first["toa_sigma_s"].to_numpy()[clock > 0]).all()
     receivers = pd.read_csv(folder / "toa" / "receivers.csv", dtype={"name": str}).set_index("name")
-    np.testing.assert_allclose(receivers["clock_sigma_s"], first.loc[receivers.index, "clock_sigma_s"], rtol=1e-5)
+    origin = json.loads((folder / "toa" / "toa.json").read_text())["origin_epoch_s"]
+    whole = pd.read_csv(folder / "toa_whole.txt", sep=r"\s+", header=None, na_values="NA").to_numpy(float) + origin
+    edges = np.r_[offsets.groupby("bin")["start"].first().to_numpy(), offsets["end"].max()]
+    for k, name in enumerate(receivers.index):
+        rows = offsets[offsets["receiver"] == name].sort_values("bin")
+        sigma = np.r_[rows["offset_start_sigma_s"].to_numpy(), rows["offset_end_sigma_s"].to_numpy()[-1]]
+        step = (np.diff(edges) * rows["drift_sigma"].to_numpy()) ** 2
+        rho = (sigma[:-1] ** 2 + sigma[1:] ** 2 - step) / np.maximum(sigma[:-1] * sigma[1:], 1e-300)
+        rho = np.where((sigma[:-1] > 0) & (sigma[1:] > 0), np.clip(rho / 2, -1, 1), 0.0)
+        covariance = np.diag(sigma ** 2)
+        for i in range(len(sigma)):
+            for j in range(i + 1, len(sigma)):
+                covariance[i, j] = covariance[j, i] = sigma[i] * sigma[j] * np.prod(rho[i:j])
+        heard = whole[np.isfinite(whole[:, k]), k]
+        bins = np.clip(np.searchsorted(edges, heard, side="right") - 1, 0, len(edges) - 2)
+        f = (heard - edges[bins]) / np.diff(edges)[bins]
+        a = (np.bincount(bins, 1 - f, len(edges)) + np.bincount(bins + 1, f, len(edges))) / len(heard)
+        expected = np.sqrt(a @ covariance @ a)
+        assert np.isclose(receivers.loc[name, "clock_sigma_s"], expected, rtol=1e-4, atol=1e-9), name
+        assert expected <= np.sqrt(a @ sigma ** 2) + 1e-12
