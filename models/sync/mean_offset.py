@@ -62,4 +62,5 @@ def mean_offset_sigma(knot_sigma: np.ndarray, drift_sigma: np.ndarray, edges: np
     variance = (B[0] * s[0]) ** 2 + float(np.sum((B[1:] * s[1:]) ** 2 * (1.0 - rho**2)))
     return float(np.sqrt(max(variance, 0.0)))
 
+
 __all__ = ["edge_weights", "mean_offset_sigma"]

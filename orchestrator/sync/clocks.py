@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.mean_offset import edge_weights, mean_offset_sigma
 from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.readers.cells import file_table
@@ -81,8 +82,6 @@ class Clocks:
         on without a σ keeps :attr:`clock_sigma`'s. None without both."""
         if self.clock_sigma is None or self.knot_sigma is None:
             return None if self.clock_sigma is None else self.clock_sigma[rows]
-        from sblsim.models.sync.mean_offset import edge_weights, mean_offset_sigma
-
         out = np.array(self.clock_sigma[rows], float)
         for k, row in enumerate(rows):
             heard = times[np.isfinite(times[:, k]), k]
