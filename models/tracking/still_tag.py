@@ -293,7 +293,7 @@ def _rows(fit, rows: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
 
 def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, trusted: np.ndarray,
               sigma_toa: float | np.ndarray, survey: np.ndarray | None, speed: dict,
-              clock_sigma: np.ndarray | None) -> StillTag:
+              clock_sigma: np.ndarray | None, clock_mean: np.ndarray | None = None) -> StillTag:
     """A still tag (``motion`` ``stationary``): its pooled place, and whether it moved beyond what its error terms
     let its fixes wander (:func:`~sblsim.models.tracking.still.still_verdict`, with the single-ping fixes' order test
     :func:`~sblsim.models.tracking.stationary.moved` as a second input: a change the fixes' order in time does not
@@ -328,7 +328,10 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     speed : dict
         The sound speed's summary (``sigma_m_s``, ``stretches_m_s`` where calibrated).
     clock_sigma : ndarray, (n,), or None
-        [s].
+        [s] each receiver's clock offset's error at a ping (the verdict's slow errors: one fix sees one bin's).
+    clock_mean : ndarray, (n,), or None
+        [s] that error averaged over the tag's arrivals at the receiver (the places' consider term: the pooled pings
+        share the average, :func:`~sblsim.models.sync.mean_offset.mean_offset_sigma`); None or NaN: ``clock_sigma``.
 
     Raises
     ------
@@ -341,12 +344,14 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     m, n = toa.shape
     sigma = np.broadcast_to(np.asarray(sigma_toa, float), (n,))
     clock = np.zeros(n) if clock_sigma is None else np.nan_to_num(np.asarray(clock_sigma, float))
+    # the places' clock term: averaged over the arrivals where known
+    clock_held = clock_sigma if clock_mean is None else np.where(np.isfinite(clock_mean), clock_mean, clock)
     stretches = np.asarray(speed.get("stretches_m_s") or [], float)
     wander = max(sv.SPEED_WANDER, float(np.std(stretches, ddof=1)) if len(stretches) > 1 else 0.0)
     speed_sigma = speed.get("sigma_m_s")
     rows = np.arange(m)
     pooled, extra, spread, gains, changed, explained, corrected = _place(toa, positions, c, fx, rows, sigma_toa,
-                                                                         survey, speed_sigma, clock_sigma)
+                                                                         survey, speed_sigma, clock_held)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
     slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
@@ -359,7 +364,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     places_tried = 1
     if went and not throughout:  # its still part (the rows to its last still trusted fix) and where it went
         last, first = int(verdict.order[verdict.change - 1]), int(verdict.order[verdict.change])
-        args = (toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_sigma)
+        args = (toa, positions, c, fx, sigma_toa, survey, speed_sigma, clock_held)
         split, before, gone = _moved_once(*args, sigma, last, first, verdict.drifted)
         explained = _two_places_explained(toa, split, before.explained, None if gone is None else gone.explained)
         places_tried = 2

@@ -40,7 +40,8 @@ class Receivers:
     CRS), and ``toa_sigma`` (n,) each one's timing noise [s] (a ``toa_sigma_s`` column, as ``sblsim toa`` writes
     it from a synchronisation's residuals; NaN where not given, None without the column), ``clock_sigma`` (n,) its
     clock offset's own uncertainty [s] (a ``clock_sigma_s`` column, as ``sblsim toa`` writes it from the
-    synchronisation's offsets; likewise)."""
+    synchronisation's offsets; likewise), ``clock_mean`` (n,) that error averaged over the tag's arrivals at it [s]
+    (a ``clock_mean_sigma_s`` column, as ``sblsim toa`` writes it for a tag's matrix; likewise)."""
 
     names: list[str]
     positions: np.ndarray
@@ -48,6 +49,7 @@ class Receivers:
     frame: Frame | None = None
     toa_sigma: np.ndarray | None = None
     clock_sigma: np.ndarray | None = None
+    clock_mean: np.ndarray | None = None
 
 
 #: The survey errors a receivers file's ``sigma_m`` column may give [m] (a standard deviation per axis).
@@ -60,12 +62,14 @@ LATITUDE, LONGITUDE = ("lat", "latitude"), ("lon", "long", "longitude")
 
 def read_receivers(path: Path | str, crs: str | None = None, frame: str | None = None) -> Receivers:
     """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``], or
-    ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``toa_sigma_s``] [, ``clock_sigma_s``] [, ``status``]) or a
+    ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``toa_sigma_s``] [, ``clock_sigma_s``]
+    [, ``clock_mean_sigma_s``] [, ``status``]) or a
     TOML file
     (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard
     deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`), ``toa_sigma_s`` the receiver's timing noise [s]
     (:data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`; empty: not known), ``clock_sigma_s`` its clock
-    offset's own uncertainty [s] (:data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`; empty: not known).
+    offset's own uncertainty [s] (:data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`; empty: not known),
+    ``clock_mean_sigma_s`` that error averaged over a tag's arrivals at the receiver [s] (likewise).
     A receiver whose coordinates
     are empty is kept without a position (its column of the TOA matrix is not used). Latitude and longitude (WGS 84,
     or the geographic ``crs``) are projected to ``frame`` (a metric CRS; default the UTM zone of their centre); x and
@@ -112,9 +116,10 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
     survey = header.index("sigma_m") if "sigma_m" in header else None
     noise = header.index("toa_sigma_s") if "toa_sigma_s" in header else None
     offset = header.index("clock_sigma_s") if "clock_sigma_s" in header else None
-    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey, noise, offset)),
+    mean = header.index("clock_mean_sigma_s") if "clock_mean_sigma_s" in header else None
+    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey, noise, offset, mean)),
                  None)
-    names, positions, sigma, timing, offsets = [], [], [], [], []
+    names, positions, sigma, timing, offsets, means = [], [], [], [], [], []
     for k, (lineno, cells) in enumerate(rows, start=1):
         if len(cells) != len(header):
             raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} cells, the header {len(header)} "
@@ -126,9 +131,10 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
         if noise is not None:
             timing.append(math.nan if cells[noise] in MISSING else number(
                 cells[noise], f"{what}: {name!r} line {lineno}", "toa_sigma_s", *TOA_SIGMA_RANGE))
-        if offset is not None:
-            offsets.append(math.nan if cells[offset] in MISSING else number(
-                cells[offset], f"{what}: {name!r} line {lineno}", "clock_sigma_s", *CLOCK_SIGMA_RANGE))
+        for column, at, into in (("clock_sigma_s", offset, offsets), ("clock_mean_sigma_s", mean, means)):
+            if at is not None:
+                into.append(math.nan if cells[at] in MISSING else number(
+                    cells[at], f"{what}: {name!r} line {lineno}", column, *CLOCK_SIGMA_RANGE))
         coordinates = [cells[k] for k in used]
         if all(c in MISSING for c in coordinates):
             positions.append([math.nan] * len(used))
@@ -153,7 +159,8 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
             positions[:, 0], positions[:, 1] = transform(crs, chosen.crs, positions[:, 0], positions[:, 1])
     return Receivers(names, positions, np.array(sigma, float) if survey is not None else None, chosen,
                      np.array(timing, float) if noise is not None else None,
-                     np.array(offsets, float) if offset is not None else None)
+                     np.array(offsets, float) if offset is not None else None,
+                     np.array(means, float) if mean is not None else None)
 
 
 def _receivers_toml(path: Path, what: str) -> Receivers:

@@ -81,7 +81,7 @@ class Clocks:
         (:func:`~sblsim.models.sync.mean_offset.mean_offset_sigma`), [s]; a receiver with an edge its arrivals lean
         on without a σ keeps :attr:`clock_sigma`'s. None without both."""
         if self.clock_sigma is None or self.knot_sigma is None:
-            return None if self.clock_sigma is None else self.clock_sigma[rows]
+            return None
         out = np.array(self.clock_sigma[rows], float)
         for k, row in enumerate(rows):
             heard = times[np.isfinite(times[:, k]), k]

@@ -138,8 +138,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             found[found] = ems[k[found]] == emission[at_home[found]]
             arrival[k[found], home] = time[at_home[found]] - this.offset(c[at_home[found]], time[at_home[found]])
             held = _averaged_clocks(fit, knot_sigma, offset_sigma, receiver[own], time[own])
-            rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white, held,
-                                         survey, truth, truth_cov, home))
+            rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white,
+                                         (offset_sigma, held), survey, truth, truth_cov, home))
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
                          "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
@@ -170,14 +170,16 @@ def _averaged_clocks(fit: ClockFit, knot_sigma: np.ndarray, each: np.ndarray, re
     return out
 
 
-def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray, clock: np.ndarray,
-                 survey: np.ndarray | None, truth: np.ndarray, truth_cov: np.ndarray, home: int) -> dict:
+def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray,
+                 clock: tuple[np.ndarray, np.ndarray], survey: np.ndarray | None, truth: np.ndarray,
+                 truth_cov: np.ndarray, home: int) -> dict:
     """A left-out sync tag scored as the still tag it is, as a reference tag is (:data:`PLACE_COLUMNS`): its one
     place from its emissions' arrivals (E, R) [s] (its own receiver's too: the clocks were fitted without any of
     them), synchronised by the clocks fitted without it (:func:`~sblsim.models.tracking.still_tag.still_tag`:
     the pooled fit of the receivers' timing noise ``white`` (R,) [s], the consider terms of the errors pooling does
-    not average, each receiver's clock offset's sigma ``clock`` (R,) [s] and position's ``survey`` (R,) [m per axis;
-    None: exact], and the receivers' jackknife; the emissions that moved beyond what those errors let its
+    not average, each receiver's clock offset's sigma ``clock`` (R,) [s] (at a ping, for the verdict; averaged over
+    the tag's arrivals, for the place: a pair) and position's ``survey`` (R,) [m per axis; None: exact], and the
+    receivers' jackknife; the emissions that moved beyond what those errors let its
     single-emission ``fixes`` (:func:`position_emissions`', without its own receiver) wander flagged), against
     ``truth`` (dim,) [m] of covariance ``truth_cov`` [m²], its receiver ``home``'s position: the 2-D NEES
     ``eᵀ (P + Q − X − Xᵀ)⁻¹ e``, ``X`` what that receiver's survey error moved the place by with it
@@ -185,7 +187,7 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
     the place cannot be fitted (too few receivers: the reason in ``place_verdict``)."""
     try:
         still = still_tag(arrival, where, c, (fixes.position, fixes.emission_time, fixes.covariance, fixes.used),
-                          fixes.ok, white, survey, {}, clock)
+                          fixes.ok, white, survey, {}, *clock)
     except ModelError as exc:
         return dict.fromkeys(PLACE_COLUMNS, np.nan) | {"place_verdict": str(exc)}
     summary = still.summary["still"]

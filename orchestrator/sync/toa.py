@@ -78,8 +78,10 @@ class ToaOutcome:
     receivers (columns), ``positions`` (R, dim) [m], ``pings`` (``pings.csv``), ``summary`` (``toa.json``),
     ``frame`` (the positions' metric frame; None without a CRS) and ``toa_sigma`` (R,) [s] each receiver's timing
     noise from the synchronisation (None where it gives none), ``clock_sigma`` (R,) [s] its clock offset's own
-    uncertainty (likewise), ``survey_sigma`` [m per horizontal axis] the survey error the synchronisation saw and
-    took, or (R,) each receiver's position's error (on refined positions; None where none)."""
+    uncertainty (likewise), ``clock_mean`` (R,) [s] that error averaged over the tag's arrivals at it (the bias a
+    still tag's pooled pings share: :meth:`~sblsim.orchestrator.sync.clocks.Clocks.averaged_sigma`; None where the
+    synchronisation gives no edges' sigmas), ``survey_sigma`` [m per horizontal axis] the survey error the
+    synchronisation saw and took, or (R,) each receiver's position's error (on refined positions; None where none)."""
 
     toa: np.ndarray
     names: list[str]
@@ -91,6 +93,7 @@ class ToaOutcome:
     toa_sigma: np.ndarray | None = None
     clock_sigma: np.ndarray | None = None
     survey_sigma: float | np.ndarray | None = None
+    clock_mean: np.ndarray | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -267,10 +270,11 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
         "wall_time_s": clock.perf_counter() - started}
     noise = None if clocks.toa_sigma is None else clocks.toa_sigma[[synced[n] for n in columns]]
     summary["toa_sigma_s"] = None if noise is None else {n: float(v) for n, v in zip(columns, noise)}
-    # each receiver's clock offset's error averaged over this tag's arrivals at it (a still tag's pooled bias)
-    offset_sigma = clocks.averaged_sigma([synced[n] for n in columns], toa)
+    offset_sigma = None if clocks.clock_sigma is None else clocks.clock_sigma[[synced[n] for n in columns]]
+    # and averaged over this tag's arrivals at each receiver (the bias a still tag's pooled pings share)
+    mean = clocks.averaged_sigma([synced[n] for n in columns], toa)
     return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
-                      clock_sigma=offset_sigma)
+                      clock_sigma=offset_sigma, clock_mean=mean)
 
 
 def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.ndarray]:

@@ -131,6 +131,7 @@ def test_offsets_clock_sigma_reaches_the_matrix(tmp_path):
                          1e9, toa_sigma=np.array([3e-4, 2e-4]), clock_sigma=clocks.clock_sigma[[1, 0]])
     _, written = write_matrix(outcome, tmp_path)
     np.testing.assert_allclose(read_receivers(written).clock_sigma, [1.5e-4, 0.0])
+    assert clocks.knot_sigma is None and clocks.averaged_sigma([0, 1], np.zeros((3, 2))) is None
     for bad, column in ((("clock_sigma_s", 1, 2e-4), "differs between its rows"), (("clock_sigma_s", 0, -1e-3),
                                                                                     "clock_sigma_s")):
         table = pd.DataFrame(rows)
@@ -139,6 +140,49 @@ def test_offsets_clock_sigma_reaches_the_matrix(tmp_path):
         with pytest.raises(ModelError, match=column) as err:
             read_clocks(sync)
         assert "clock_sigma_s" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_offsets_sigmas_give_each_tags_averaged_clock_term(tmp_path):
+    """``offsets.csv``'s offsets' and drifts' sigmas (B's edges 1, 2 and 1.5 × 10⁻⁴ s, its drifts' such that the
+    edges are uncorrelated) are read into the clocks; a tag heard by B at both bins' middles has B's clock error
+    averaged over them, ``√(Σ aₖ² σₖ²)`` with a = (¼, ½, ¼) (written out), written into the matrix's
+    ``receivers.csv`` as ``clock_mean_sigma_s`` beside ``clock_sigma_s`` and read back; a negative sigma in either
+    file is refused in one line naming its column."""
+    sigma_b = [1e-4, 2e-4, 1.5e-4]
+    rows = []
+    for name, knots in (("A", [0.0, 0.0, 0.0]), ("B", sigma_b)):
+        for k in range(2):
+            drift = np.hypot(knots[k], knots[k + 1]) / 3600.0  # uncorrelated edges
+            rows.append({"receiver": name, "bin": k, "start": 1e9 + 3600 * k, "end": 1e9 + 3600 * (k + 1),
+                         "offset_start_s": 0.0, "offset_end_s": 0.0, "offset_start_sigma_s": knots[k],
+                         "offset_end_sigma_s": knots[k + 1], "drift": 0.0, "drift_sigma": drift,
+                         "toa_sigma_s": 2e-4, "clock_sigma_s": 1.6e-4 if name == "B" else 0.0})
+    sync = tmp_path / "sync"
+    sync.mkdir()
+    pd.DataFrame(rows).to_csv(sync / "offsets.csv", index=False)
+    clocks = read_clocks(sync)
+    np.testing.assert_allclose(clocks.knot_sigma[1], sigma_b)
+    times = np.array([[1e9 + 1800.0, np.nan], [1e9 + 5400.0, 1e9 + 5400.0]])  # B's column first, then A's
+    mean = clocks.averaged_sigma([1, 0], times)
+    expected = np.sqrt((0.25 * sigma_b[0]) ** 2 + (0.5 * sigma_b[1]) ** 2 + (0.25 * sigma_b[2]) ** 2)
+    np.testing.assert_allclose(mean, [expected, 0.0], rtol=1e-9)
+    outcome = ToaOutcome(np.zeros((2, 2)), ["B", "A"], np.array([[0.0, 0.0], [10.0, 0.0]]), pd.DataFrame(), {},
+                         1e9, clock_sigma=clocks.clock_sigma[[1, 0]], clock_mean=mean)
+    _, written = write_matrix(outcome, tmp_path)
+    back = read_receivers(written)
+    np.testing.assert_allclose(back.clock_mean, [expected, 0.0], rtol=1e-5)
+    np.testing.assert_allclose(back.clock_sigma, [1.6e-4, 0.0])
+    table = pd.DataFrame(rows)
+    table.loc[1, "offset_start_sigma_s"] = -1e-4
+    table.to_csv(sync / "offsets.csv", index=False)
+    with pytest.raises(ModelError, match="offset_start_sigma_s") as err:
+        read_clocks(sync)
+    assert "\n" not in str(err.value)
+    text = written.read_text().replace(f"{expected:.6g}", "-0.001")
+    written.write_text(text)
+    with pytest.raises(ModelError, match="clock_mean_sigma_s") as err:
+        read_receivers(written)
+    assert "\n" not in str(err.value)
 
 
 def test_the_tracker_adds_the_clocks_term_of_the_receivers_file(tmp_path):
@@ -162,3 +206,11 @@ def test_the_tracker_adds_the_clocks_term_of_the_receivers_file(tmp_path):
     expected = central_clock_covariance(toa - start, CLOCK)
     grown = [(r.track[["sigma_x", "sigma_y"]].to_numpy() ** 2)[0] for r in runs]
     np.testing.assert_allclose(grown[1] - grown[0], np.diag(expected), rtol=0.05)
+    # the error averaged over the tag's arrivals (clock_mean_sigma_s), half of one bin's: the place's term a quarter
+    averaged = tmp_path / "averaged"
+    averaged.mkdir()
+    write_matrix(ToaOutcome(**(vars(outcome) | {"clock_sigma": CLOCK, "clock_mean": CLOCK / 2})), averaged)
+    halved = track(averaged / "toa.txt", averaged / "receivers.csv", sound_speed=C, toa_sigma=SIGMA,
+                   motion="stationary")
+    np.testing.assert_allclose((halved.track[["sigma_x", "sigma_y"]].to_numpy() ** 2)[0] - grown[0],
+                               np.diag(expected) / 4, rtol=0.05)

@@ -146,8 +146,9 @@ def test_a_receivers_files_noise_outside_its_range_is_refused(synchronised, tmp_
 def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
     """``offsets.csv``'s ``clock_sigma_s`` is each receiver's offsets' own RMS sigma (``toa_noise``'s ``clock_s``,
     the same on every row of the receiver; 0 at the reference), within its ``toa_sigma_s`` (the two in quadrature
-    with the residuals' part); the matrix's ``receivers.csv`` carries, for the stationary fix's clock term, each
-    receiver's offset error averaged over the tag's arrivals at it: ``√(aᵀ C a)``, ``a`` the arrivals' mean weights
+    with the residuals' part); the matrix's ``receivers.csv`` carries it (the still verdict's clock term: one fix sees
+    one bin's error) and, for the stationary fix's clock term (``clock_mean_sigma_s``), each receiver's offset error
+    averaged over the tag's arrivals at it: ``√(aᵀ C a)``, ``a`` the arrivals' mean weights
     on the bins' edges and C the edges' covariance from ``offsets.csv``'s sigmas (neighbours' from the drift's σ,
     farther ones the product of the correlations between: written out densely here), below the RMS of the edges'
     sigmas it leans on."""
@@ -162,6 +163,7 @@ def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
     np.testing.assert_allclose(first["toa_sigma_s"], np.hypot(parts, clock), rtol=1e-9)
     assert (clock == 0).sum() == 1 and (clock[clock > 0] < first["toa_sigma_s"].to_numpy()[clock > 0]).all()
     receivers = pd.read_csv(folder / "toa" / "receivers.csv", dtype={"name": str}).set_index("name")
+    np.testing.assert_allclose(receivers["clock_sigma_s"], first.loc[receivers.index, "clock_sigma_s"], rtol=1e-5)
     origin = json.loads((folder / "toa" / "toa.json").read_text())["origin_epoch_s"]
     whole = pd.read_csv(folder / "toa_whole.txt", sep=r"\s+", header=None, na_values="NA").to_numpy(float) + origin
     edges = np.r_[offsets.groupby("bin")["start"].first().to_numpy(), offsets["end"].max()]
@@ -180,5 +182,5 @@ def test_each_receivers_clock_sigma_is_carried_to_the_matrix(synchronised):
         f = (heard - edges[bins]) / np.diff(edges)[bins]
         a = (np.bincount(bins, 1 - f, len(edges)) + np.bincount(bins + 1, f, len(edges))) / len(heard)
         expected = np.sqrt(a @ covariance @ a)
-        assert np.isclose(receivers.loc[name, "clock_sigma_s"], expected, rtol=1e-4, atol=1e-9), name
+        assert np.isclose(receivers.loc[name, "clock_mean_sigma_s"], expected, rtol=1e-4, atol=1e-9), name
         assert expected <= np.sqrt(a @ sigma ** 2) + 1e-12
