@@ -39,12 +39,15 @@ def edge_weights(times: np.ndarray, edges: np.ndarray) -> np.ndarray:
 def mean_offset_sigma(knot_sigma: np.ndarray, drift_sigma: np.ndarray, edges: np.ndarray,
                       times: np.ndarray) -> float:
     """σ [s] of a receiver's offset error averaged over its arrivals' ``times`` (n,) [s] (the module docstring), from
-    its offsets' σ at the ``edges`` (K + 1,) [s] and its drifts' σ per bin (K,) [s/s]. An edge without a σ (NaN) and
-    a bin without a drift σ tie nothing (correlation 0); no time: 0."""
+    its offsets' σ at the ``edges`` (K + 1,) [s] and its drifts' σ per bin (K,) [s/s]. NaN where an edge the times
+    lean on has no σ (NaN: not computed, nothing to average); an edge without one they do not lean on, and a bin
+    without a drift σ, tie nothing (correlation 0); no time: 0."""
     a = edge_weights(times, edges)
     used = np.flatnonzero(a > 0)
     if not len(used):
         return 0.0
+    if not np.isfinite(np.asarray(knot_sigma, float)[used]).all():
+        return float("nan")
     s = np.nan_to_num(np.asarray(knot_sigma, float))
     lo, hi = int(used[0]), int(used[-1]) + 1
     s, a = s[lo:hi], a[lo:hi]

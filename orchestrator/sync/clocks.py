@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.models.sync.mean_offset import edge_weights, mean_offset_sigma
+from sblsim.models.sync.mean_offset import mean_offset_sigma
 from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.paths import inside
 from sblsim.orchestrator.readers.cells import file_table
@@ -85,9 +85,9 @@ class Clocks:
         out = np.array(self.clock_sigma[rows], float)
         for k, row in enumerate(rows):
             heard = times[np.isfinite(times[:, k]), k]
-            leaned = edge_weights(heard, self.edges) > 0
-            if len(heard) and np.isfinite(self.knot_sigma[row][leaned]).all():
-                out[k] = mean_offset_sigma(self.knot_sigma[row], self.drift_sigma[row], self.edges, heard)
+            if len(heard):
+                mean = mean_offset_sigma(self.knot_sigma[row], self.drift_sigma[row], self.edges, heard)
+                out[k] = mean if np.isfinite(mean) else out[k]
         return out
 
     def reference(self) -> str | None:

@@ -161,12 +161,14 @@ def _averaged_clocks(fit: ClockFit, knot_sigma: np.ndarray, each: np.ndarray, re
     """Each receiver's clock offset error (R,) [s] averaged over a still tag's arrivals at it (``receiver`` (n,),
     ``time`` (n,) [s] on the fit's base: :func:`~sblsim.models.sync.mean_offset.mean_offset_sigma` of its edges'
     ``knot_sigma`` (R, K + 1) and its bins' drifts' σ), the bias its pooled place takes of it; ``each`` (R,) [s]
-    (one edge's) where its clock broke (a row per segment) or the tag has no arrival there."""
+    (one edge's) where its clock broke (a row per segment), the tag has no arrival there, or an edge its arrivals
+    lean on has no σ."""
     out = np.array(each, float)
     if fit.site is not None:
         return out
     for j in np.unique(receiver):
-        out[j] = mean_offset_sigma(knot_sigma[j], fit.drift_sigma[j], fit.edges, time[receiver == j])
+        mean = mean_offset_sigma(knot_sigma[j], fit.drift_sigma[j], fit.edges, time[receiver == j])
+        out[j] = mean if np.isfinite(mean) else out[j]  # (an edge it leans on without a σ: one edge's)
     return out
 
 

@@ -49,7 +49,8 @@ def test_the_averaged_error_is_the_fitted_clocks_own():
 
 def test_the_weights_and_the_edge_cases():
     """The weights sum to 1 and a time on an edge is all its; a time before the first edge is the first's; no time:
-    no weight and a σ of 0; an edge without a σ ties nothing (its neighbours' errors independent)."""
+    no weight and a σ of 0; an edge without a σ ties nothing (its neighbours' errors independent), and where the
+    times lean on it the σ is not known (NaN: the caller keeps one edge's)."""
     edges = np.array([0.0, 10.0, 30.0])
     assert np.allclose(edge_weights(np.array([10.0]), edges), [0.0, 1.0, 0.0])
     assert np.allclose(edge_weights(np.array([-5.0]), edges), [1.0, 0.0, 0.0])
@@ -59,3 +60,4 @@ def test_the_weights_and_the_edge_cases():
     # the middle edge without a σ: the two ends independent, each half the weight
     got = mean_offset_sigma(np.array([1.0, np.nan, 1.0]), np.array([0.1, 0.1]), edges, np.array([0.0, 30.0]))
     assert np.isclose(got, np.sqrt(0.5))
+    assert np.isnan(mean_offset_sigma(np.array([1.0, np.nan, 1.0]), np.array([0.1, 0.1]), edges, np.array([5.0])))
