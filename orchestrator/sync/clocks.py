@@ -44,6 +44,10 @@ from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 #: The most rows of ``offsets.csv`` read (receivers × bins) and the largest offset [s] it may hold.
 MAX_OFFSET_ROWS = 1_000_000
 MAX_OFFSET = 30 * 86400.0
+#: ``offsets.csv``'s columns of each row's offsets' σ at its start and end [s] and its drift's σ [s/s], with the most
+#: each may say and its unit (:attr:`Clocks.knot_sigma`; all three or none).
+SPREAD_COLUMNS = (("offset_start_sigma_s", MAX_OFFSET, "s"), ("offset_end_sigma_s", MAX_OFFSET, "s"),
+                  ("drift_sigma", 1.0, "s/s"))
 
 
 @dataclass
@@ -149,7 +153,7 @@ def read_clocks(folder: Path | str) -> Clocks:
     body, lines, name, col = _columns(path, what, ("receiver", "bin", "start", "end", "offset_start_s",
                                                    "offset_end_s"), "sblsim sync's offsets.csv",
                                       ("toa_sigma_s", "clock_sigma_s", "segment", "clock_from", "clock_to",
-                                       "clock_part", "offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"))
+                                       "clock_part", *(c for c, _, _ in SPREAD_COLUMNS)))
     receiver = _pattern(body[col["receiver"]], IDENTIFIER, what, name, lines, "receiver",
                         "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'").to_numpy()
     bins = _numbers(body[col["bin"]], what, name, lines, "bin", 0, MAX_OFFSET_ROWS)
@@ -170,10 +174,9 @@ def read_clocks(folder: Path | str) -> Clocks:
         clock_sigma = _numbers(body[col["clock_sigma_s"]], what, name, lines, "clock_sigma_s", *CLOCK_SIGMA_RANGE,
                                unit="s")
     spread = None
-    if {"offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"} <= set(col):  # (a folder before them: none)
+    if all(c in col for c, _, _ in SPREAD_COLUMNS):  # (a folder before them: none)
         spread = tuple(_numbers(body[col[c]], what, name, lines, c, 0.0, high, missing=True, unit=unit)
-                       for c, high, unit in (("offset_start_sigma_s", MAX_OFFSET, "s"),
-                                             ("offset_end_sigma_s", MAX_OFFSET, "s"), ("drift_sigma", 1.0, "s/s")))
+                       for c, high, unit in SPREAD_COLUMNS)
     parts = None
     if "segment" in col:  # a receiver's clock broke: its segments' rows, each with the times it holds for
         if not {"clock_from", "clock_to"} <= set(col):
@@ -216,9 +219,8 @@ def offsets_clocks(offsets: pd.DataFrame) -> Clocks:
                      tuple(offsets[c].to_numpy(float) for c in ("segment", "clock_from", "clock_to", "clock_part")
                            if c in offsets) if "segment" in offsets else None,
                      offsets["clock_sigma_s"].to_numpy(float) if "clock_sigma_s" in offsets else None,
-                     tuple(offsets[c].to_numpy(float) for c in ("offset_start_sigma_s", "offset_end_sigma_s",
-                                                                  "drift_sigma"))
-                     if {"offset_start_sigma_s", "offset_end_sigma_s", "drift_sigma"} <= set(offsets) else None)
+                     tuple(offsets[c].to_numpy(float) for c, _, _ in SPREAD_COLUMNS)
+                     if all(c in offsets for c, _, _ in SPREAD_COLUMNS) else None)
 
 
 def logged_clocks(receivers: list[str], start: float, end: float) -> Clocks:
