@@ -448,5 +448,5 @@ def with_positions(table: pd.DataFrame, refined: dict[str, tuple[float, float]] 
     return table, int(moved.sum())
 
 
-__all__ = ["Clocks", "MAX_OFFSET", "MAX_OFFSET_ROWS", "clocks_of", "logged_clocks", "offsets_clocks", "read_clocks",
-           "read_position_sigmas", "read_positions", "with_positions"]
+__all__ = ["Clocks", "MAX_OFFSET", "MAX_OFFSET_ROWS", "SPREAD_COLUMNS", "clocks_of", "logged_clocks", "offsets_clocks",
+           "read_clocks", "read_position_sigmas", "read_positions", "with_positions"]
