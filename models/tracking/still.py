@@ -254,7 +254,7 @@ def threshold(candidates: int, level: float = LEVEL) -> float:
 
 def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray, trusted: np.ndarray,
                   slow: np.ndarray, multipath: np.ndarray | None = None, time_scale: float = SLOW_TIME_S,
-                  level: float = LEVEL, order_test: bool = False) -> StillVerdict:
+                  level: float = LEVEL, order_test: bool = False, white_floor: float = 0.0) -> StillVerdict:
     """Whether, and from which fix on, a still tag moved beyond what its error terms let its fixes wander (module
     docstring).
 
@@ -281,6 +281,10 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
         Where no change is found, whether the fixes lie in an order in time their error terms do not make
         (:func:`wanders`: ``throughout`` with no ``change``; a caller's second input, such as arrivals that fit no
         one place, says when to ask).
+    white_floor : float
+        The least dispersion s² taken [1]: the share of the fixes' covariances that is the times' rounding, whose
+        size at a still tag changes as the clocks drift across the time grid (small while its receivers' arrivals
+        round alike, up to a quantum's apart later), so that the fixes' scatter in one period is no measure of it.
 
     Returns
     -------
@@ -296,7 +300,7 @@ def still_verdict(fixes: np.ndarray, covariances: np.ndarray, times: np.ndarray,
     if len(k) < 2 * MIN_SEGMENT:
         return StillVerdict(len(k), float("nan"), float("nan"), float("nan"), k, None)
     x, R, t = x[k], R[k], t[k]
-    s2 = max(white_scale(x, R), 1e-6)
+    s2 = max(white_scale(x, R), float(white_floor), 1e-6)
     Rw = s2 * R
     x = _cleaned(x, Rw, 1.0)
     C = np.asarray(slow, float) + (0.0 if multipath is None else s2 * np.asarray(multipath, float))

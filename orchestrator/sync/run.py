@@ -36,7 +36,7 @@ from sblsim.models.sync.emissions import MIN_SHARED, connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
-from sblsim.models.sync.resolution import residual_warning, time_quantum
+from sblsim.models.sync.resolution import residual_warning, rounding_sigma, time_quantum
 from sblsim.models.sync.season import breaks_in_windows
 from sblsim.models.sync.windows import OVERLAP_HOURS, WINDOW_DAYS, season_windows
 from sblsim.orchestrator.io.arguments import whole
@@ -397,9 +397,10 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                                                    tag_names, tag_home, positions)  # on the table's positions
     if survey == "taken" and seen is not None and seen.seen:  # the sync tags scored with it
         table_sigma = seen.sigma
+    quanta = [time_quantum(time[receiver == j] + origin) for j in range(n_receivers)]  # each receiver's rounding
     sync_tags = _sync_tags(fit, receiver, tag, emission, time, distance, slowness, used & (rows >= 0), synced, start,
                            width, positions, tag_names, tag_home, names, leave_one_out, notes, geometry, rows, site,
-                           fits, table_sigma, windows)
+                           fits, table_sigma, windows, np.array([rounding_sigma(q) for q in quanta]))
     release()  # the sync tags' refits' freed buffers back to the system before the residuals' table is made
     refined = _positions(fit, positions, names, linked, identified, tag_names, float(survey_sigma)) \
         if refine_positions else None
@@ -421,7 +422,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
         summary["survey_error"] = None if seen is None else seen.summary()
         if survey == "taken" and table_sigma is not None:
             summary |= {"survey_sigma_m": float(table_sigma), "survey_sigma_from": "seen"}
-    rounded = residual_warning([time_quantum(time[receiver == j] + origin) for j in range(n_receivers)], noise.noise,
+    rounded = residual_warning(quanta, noise.noise,
                                names, 1.0 / float(np.median(emission_slowness)), f"detections {detections.source!r}")
     if notes_first or rounded:  # said first: the table's unit, the rounding
         summary["warnings"] = notes_first + ([rounded] if rounded else []) + summary.get("warnings", [])

@@ -37,7 +37,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
                positions, tag_names, tag_home, names, leave_one_out: bool, notes: list[str],
                geometry: Geometry | None = None, clock: np.ndarray | None = None,
                site: np.ndarray | None = None, fits: dict | None = None,
-               table_sigma: float | np.ndarray | None = None, windows: Windows | None = None) -> pd.DataFrame:
+               table_sigma: float | np.ndarray | None = None, windows: Windows | None = None,
+               rounding: np.ndarray | None = None) -> pd.DataFrame:
     """``sync_tags.csv``: each sync tag positioned emission by emission from the other receivers' synchronised
     arrivals (its own receiver left out), with the clocks fitted without its arrivals (``leave_one_out``), against
     its known position: the table's, or with ``geometry`` its receiver's position refined without the tag's
@@ -60,7 +61,8 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
     horizontal sigma per axis (one, or each receiver's (R,)), summed into the NEES's covariance (the survey's stated
     error) and a consider term of each place. ``windows``: the
     season's clocks were fitted in these windows (:mod:`sblsim.models.sync.windows`), and so is each fit without a
-    tag."""
+    tag. ``rounding`` (R,) [s]: each receiver's times' rounding σ, a slow error of each place's verdict (None:
+    none)."""
     dim = positions.shape[1]
     rows = []
     c = receiver if clock is None else clock
@@ -139,7 +141,7 @@ def _sync_tags(fit: ClockFit, receiver, tag, emission, time, distance, slowness,
             arrival[k[found], home] = time[at_home[found]] - this.offset(c[at_home[found]], time[at_home[found]])
             held = _averaged_clocks(fit, knot_sigma, offset_sigma, receiver[own], time[own])
             rows[-1].update(_still_place(arrival, where, 1.0 / float(np.nanmedian(s)), fixes, white,
-                                         (offset_sigma, held), survey, truth, truth_cov, home))
+                                         (offset_sigma, held), survey, truth, truth_cov, home, rounding))
         rows[-1].update({"fixes_unchecked": int((fixes.status == UNCHECKED).sum()),
                          "fixes_failed": int((fixes.status == FAILED).sum()),
                          "fixes_ambiguous": int((fixes.status == AMBIGUOUS).sum()),
@@ -174,7 +176,7 @@ def _averaged_clocks(fit: ClockFit, knot_sigma: np.ndarray, each: np.ndarray, re
 
 def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white: np.ndarray,
                  clock: tuple[np.ndarray, np.ndarray], survey: np.ndarray | None, truth: np.ndarray,
-                 truth_cov: np.ndarray, home: int) -> dict:
+                 truth_cov: np.ndarray, home: int, rounding: np.ndarray | None = None) -> dict:
     """A left-out sync tag scored as the still tag it is, as a reference tag is (:data:`PLACE_COLUMNS`): its one
     place from its emissions' arrivals (E, R) [s] (its own receiver's too: the clocks were fitted without any of
     them), synchronised by the clocks fitted without it (:func:`~sblsim.models.tracking.still_tag.still_tag`:
@@ -185,11 +187,12 @@ def _still_place(arrival: np.ndarray, where: np.ndarray, c: float, fixes, white:
     single-emission ``fixes`` (:func:`position_emissions`', without its own receiver) wander flagged), against
     ``truth`` (dim,) [m] of covariance ``truth_cov`` [m²], its receiver ``home``'s position: the 2-D NEES
     ``eᵀ (P + Q − X − Xᵀ)⁻¹ e``, ``X`` what that receiver's survey error moved the place by with it
-    (:func:`~sblsim.models.tracking.still_tag.survey_cross`, where a survey error is stated); ``c`` [m/s]. NaN where
-    the place cannot be fitted (too few receivers: the reason in ``place_verdict``)."""
+    (:func:`~sblsim.models.tracking.still_tag.survey_cross`, where a survey error is stated); ``c`` [m/s];
+    ``rounding`` (R,) [s] the receivers' times' rounding σ (the verdict's). NaN where the place cannot be fitted (too
+    few receivers: the reason in ``place_verdict``)."""
     try:
         still = still_tag(arrival, where, c, (fixes.position, fixes.emission_time, fixes.covariance, fixes.used),
-                          fixes.ok, white, survey, {}, *clock)
+                          fixes.ok, white, survey, {}, *clock, rounding=rounding)
     except ModelError as exc:
         return dict.fromkeys(PLACE_COLUMNS, np.nan) | {"place_verdict": str(exc)}
     summary = still.summary["still"]

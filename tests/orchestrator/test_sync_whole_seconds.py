@@ -141,3 +141,25 @@ def test_tenths_are_said_against_the_sync_s_residuals(sim, tmp_path, capsys):
     sigma = 0.1 / np.sqrt(12.0)
     noise = json.loads((tmp_path / "tenths" / "out" / "sync.json").read_text())["toa_noise"]
     assert "every receiver's times" in line and all(v["residuals_s"] <= np.sqrt(2) * sigma for v in noise.values())
+
+
+def test_each_receiver_s_rounding_reaches_the_left_out_sync_tags_verdicts(sim, tmp_path, monkeypatch):
+    """Hundredths of a second: every left-out sync tag's still-tag verdict is given each receiver's rounding σ
+    (0.01 / √12 s: :func:`~sblsim.models.tracking.still_tag.still_tag`'s ``rounding``); the times to 0.1 µs: none."""
+    from sblsim.orchestrator.sync import sync_tags
+
+    given = []
+
+    def still_tag(*args, rounding=None, **kwargs):
+        given.append(None if rounding is None else np.asarray(rounding, float).copy())
+        return real(*args, rounding=rounding, **kwargs)
+
+    real = sync_tags.still_tag
+    monkeypatch.setattr(sync_tags, "still_tag", still_tag)
+    for name, quantum, expected in (("hundredths", 0.01, 0.01 / np.sqrt(12.0)), ("fine", 0.0, 0.0)):
+        given.clear()
+        detections, receivers = _files(tmp_path / name, sim, quantum=quantum)
+        sblsim.sync(detections, receivers=receivers, out=tmp_path / name / "out", sound_speed=sim.sound_speed)
+        assert len(given) == len(sim.positions), len(given)
+        for rounding in given:
+            np.testing.assert_allclose(rounding, np.full(len(sim.positions), expected), rtol=1e-9, atol=1e-12)
