@@ -39,6 +39,10 @@ def rounding_sigma(quantum: float) -> float:
     return float(quantum) / np.sqrt(12.0)
 
 
+#: The rounding σ a receivers file may give [s] (``rounding_sigma_s``): none to the coarsest of :data:`QUANTA`'s.
+ROUNDING_SIGMA_RANGE = (0.0, rounding_sigma(max(QUANTA)))
+
+
 def time_quantum(times: np.ndarray) -> float:
     """The coarsest of :data:`QUANTA` every time is a whole multiple of, 0 where none is (sub-millisecond).
 

@@ -335,13 +335,15 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
         share the average, :func:`~sblsim.models.sync.mean_offset.mean_offset_sigma`); None or NaN: ``clock_sigma``.
     rounding : ndarray, (n,), float or None
         [s] each receiver's logged times' rounding σ (``q / √12``,
-        :func:`~sblsim.models.sync.resolution.rounding_sigma`; 0 or None: finer than a millisecond). At a still tag
-        the receivers' arrivals keep their places on the time grid for as long as the clocks take to drift across a
+        :func:`~sblsim.models.sync.resolution.rounding_sigma`; 0 or None: not known). At a still tag the
+        receivers' arrivals keep their places on the time grid for as long as the clocks take to drift across a
         quantum (hours): while they round alike the fixes scatter far less than the rounding's σ, and more later,
         so the fixes' dispersion in the verdict is at least the rounding's share of their timing noise (the
         arrivals' mean of ``(rounding / σ_toa)²``, :func:`~sblsim.models.tracking.still.still_verdict`'s
-        ``white_floor``). The boats' times cut to tenths of a second had 3 of the 9 left-out sync tags called moved
-        or moving (736 of 2,311 emissions flagged); taking it, none.
+        ``white_floor``); and the clocks synchronised from the sync tags' rounded times keep such errors for hours
+        too, so each receiver's rounding σ is a slow error of the verdict beside its clock's. The boats' times cut
+        to tenths of a second had 3 of the 9 left-out sync tags called moved or moving (736 of 2,311 emissions
+        flagged); taking it, none.
 
     Raises
     ------
@@ -364,13 +366,14 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
                                                                          survey, speed_sigma, clock_held)
     rho = np.linalg.norm(pooled.position[None, :] - positions, axis=1)
     used = np.asarray(fused, bool) & np.asarray(trusted, bool)[:, None]
-    slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
-                              np.diag(clock**2) + wander**2 * np.outer(rho, rho) / c**4)
-    multipath = sv.slow_covariance(positions, pooled.position, c, used, sigma, np.diag(sigma**2))
-    # a place that explains too few of its arrivals: whether its fixes lie in an order their errors do not make
-    # the rounding's share of the fixes' timing noise, their dispersion's floor (over the arrivals used)
+    # the times' rounding a slow error too (as the clocks synchronised from rounded times carry it)
     rounded = np.broadcast_to(np.nan_to_num(np.asarray(0.0 if rounding is None else rounding, float)), (n,))
+    slow = sv.slow_covariance(positions, pooled.position, c, used, sigma,
+                              np.diag(clock**2 + rounded**2) + wander**2 * np.outer(rho, rho) / c**4)
+    multipath = sv.slow_covariance(positions, pooled.position, c, used, sigma, np.diag(sigma**2))
+    # the rounding's share of the fixes' timing noise, their dispersion's floor (over the arrivals used)
     floor = float(np.sum(used * (rounded / sigma) ** 2) / max(used.sum(), 1)) if rounded.any() else 0.0
+    # a place that explains too few of its arrivals: whether its fixes lie in an order their errors do not make
     verdict = sv.still_verdict(fx, fc, fe, trusted, slow, multipath, order_test=explained < MIN_EXPLAINED,
                                white_floor=min(floor, 1.0))
     count, ratio, ordered = moved(fx, fe, trusted)
@@ -419,6 +422,7 @@ def still_tag(toa: np.ndarray, positions: np.ndarray, c: float, fixes: tuple, tr
     said = "unchecked" if unchecked else "moving" if went and throughout else "moved" if went else "still"
     summary = {"verdict": said,
                "trusted_fixes": verdict.fixes, "dispersion": _number(verdict.white_scale),
+               "dispersion_floor": min(floor, 1.0),  # the times' rounding's share of the timing noise
                "explained_share": _number(explained), "places_explaining": places_tried, "scattered": bool(scattered),
                "step_statistic": _number(verdict.statistic), "threshold": _number(verdict.threshold),
                "level": sv.LEVEL, "slow_time_s": sv.SLOW_TIME_S, "speed_wander_m_s": wander,

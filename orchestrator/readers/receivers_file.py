@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.resolution import ROUNDING_SIGMA_RANGE
 from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE, TOA_SIGMA_RANGE
 from sblsim.orchestrator.io.frames import (
     CHOSEN_INPUT,
@@ -41,7 +42,8 @@ class Receivers:
     it from a synchronisation's residuals; NaN where not given, None without the column), ``clock_sigma`` (n,) its
     clock offset's own uncertainty [s] (a ``clock_sigma_s`` column, as ``sblsim toa`` writes it from the
     synchronisation's offsets; likewise), ``clock_mean`` (n,) that error averaged over the tag's arrivals at it [s]
-    (a ``clock_mean_sigma_s`` column, as ``sblsim toa`` writes it for a tag's matrix; likewise)."""
+    (a ``clock_mean_sigma_s`` column, as ``sblsim toa`` writes it for a tag's matrix; likewise), ``rounding`` (n,)
+    its logged times' rounding σ [s] (a ``rounding_sigma_s`` column, likewise: a still tag's verdict takes it)."""
 
     names: list[str]
     positions: np.ndarray
@@ -50,6 +52,7 @@ class Receivers:
     toa_sigma: np.ndarray | None = None
     clock_sigma: np.ndarray | None = None
     clock_mean: np.ndarray | None = None
+    rounding: np.ndarray | None = None
 
 
 #: The survey errors a receivers file's ``sigma_m`` column may give [m] (a standard deviation per axis).
@@ -63,13 +66,15 @@ LATITUDE, LONGITUDE = ("lat", "latitude"), ("lon", "long", "longitude")
 def read_receivers(path: Path | str, crs: str | None = None, frame: str | None = None) -> Receivers:
     """Read the receivers' positions: a CSV (a name column, ``x_m``/``x``, ``y_m``/``y`` [, ``z_m``/``z``], or
     ``lat``, ``lon`` [°] [, ``z_m``]; [, ``sigma_m``] [, ``toa_sigma_s``] [, ``clock_sigma_s``]
-    [, ``clock_mean_sigma_s``] [, ``status``]) or a
+    [, ``clock_mean_sigma_s``] [, ``rounding_sigma_s``] [, ``status``]) or a
     TOML file
     (``[[receiver]]`` with ``name``, ``x_m``, ``y_m`` [, ``z_m``] [, ``sigma_m``]); ``sigma_m`` the survey's standard
     deviation per axis [m] (:data:`SURVEY_SIGMA_RANGE`), ``toa_sigma_s`` the receiver's timing noise [s]
     (:data:`~sblsim.models.tracking.timing.TOA_SIGMA_RANGE`; empty: not known), ``clock_sigma_s`` its clock
     offset's own uncertainty [s] (:data:`~sblsim.models.tracking.timing.CLOCK_SIGMA_RANGE`; empty: not known),
-    ``clock_mean_sigma_s`` that error averaged over a tag's arrivals at the receiver [s] (likewise).
+    ``clock_mean_sigma_s`` that error averaged over a tag's arrivals at the receiver [s] (likewise),
+    ``rounding_sigma_s`` the rounding σ of its logged times [s] (``q / √12``:
+    :data:`~sblsim.models.sync.resolution.ROUNDING_SIGMA_RANGE`; empty: not known).
     A receiver whose coordinates
     are empty is kept without a position (its column of the TOA matrix is not used). Latitude and longitude (WGS 84,
     or the geographic ``crs``) are projected to ``frame`` (a metric CRS; default the UTM zone of their centre); x and
@@ -117,9 +122,10 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
     noise = header.index("toa_sigma_s") if "toa_sigma_s" in header else None
     offset = header.index("clock_sigma_s") if "clock_sigma_s" in header else None
     mean = header.index("clock_mean_sigma_s") if "clock_mean_sigma_s" in header else None
-    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey, noise, offset, mean)),
-                 None)
-    names, positions, sigma, timing, offsets, means = [], [], [], [], [], []
+    rounded = header.index("rounding_sigma_s") if "rounding_sigma_s" in header else None
+    label = next((k for k in range(len(header)) if k not in used and k not in (status, survey, noise, offset, mean,
+                                                                                rounded)), None)
+    names, positions, sigma, timing, offsets, means, roundings = [], [], [], [], [], [], []
     for k, (lineno, cells) in enumerate(rows, start=1):
         if len(cells) != len(header):
             raise ModelError(f"{what}: {name!r} line {lineno} has {len(cells)} cells, the header {len(header)} "
@@ -131,10 +137,12 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
         if noise is not None:
             timing.append(math.nan if cells[noise] in MISSING else number(
                 cells[noise], f"{what}: {name!r} line {lineno}", "toa_sigma_s", *TOA_SIGMA_RANGE))
-        for column, at, into in (("clock_sigma_s", offset, offsets), ("clock_mean_sigma_s", mean, means)):
+        for column, at, into, allowed in (("clock_sigma_s", offset, offsets, CLOCK_SIGMA_RANGE),
+                                          ("clock_mean_sigma_s", mean, means, CLOCK_SIGMA_RANGE),
+                                          ("rounding_sigma_s", rounded, roundings, ROUNDING_SIGMA_RANGE)):
             if at is not None:
                 into.append(math.nan if cells[at] in MISSING else number(
-                    cells[at], f"{what}: {name!r} line {lineno}", column, *CLOCK_SIGMA_RANGE))
+                    cells[at], f"{what}: {name!r} line {lineno}", column, *allowed))
         coordinates = [cells[k] for k in used]
         if all(c in MISSING for c in coordinates):
             positions.append([math.nan] * len(used))
@@ -160,7 +168,8 @@ def read_receivers(path: Path | str, crs: str | None = None, frame: str | None =
     return Receivers(names, positions, np.array(sigma, float) if survey is not None else None, chosen,
                      np.array(timing, float) if noise is not None else None,
                      np.array(offsets, float) if offset is not None else None,
-                     np.array(means, float) if mean is not None else None)
+                     np.array(means, float) if mean is not None else None,
+                     np.array(roundings, float) if rounded is not None else None)
 
 
 def _receivers_toml(path: Path, what: str) -> Receivers:

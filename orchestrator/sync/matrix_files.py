@@ -63,7 +63,8 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
     (P,) [m] the tag's depth per ping (NaN where none), ``toa.txt`` has a ``depth_m`` column first (and a header
     whatever the receivers' names: the column's name is not a number). ``receivers.csv`` has each receiver's
     timing noise (``toa_sigma_s`` [s]), its clock offset's uncertainty (``clock_sigma_s`` [s]) and that averaged
-    over the tag's arrivals at it (``clock_mean_sigma_s`` [s]) where the synchronisation gives them, and each
+    over the tag's arrivals at it (``clock_mean_sigma_s`` [s]) where the synchronisation gives them, the rounding σ
+    of its logged times (``rounding_sigma_s`` [s]) where known, and each
     one's survey error (``sigma_m`` [m per horizontal axis]) where the synchronisation took the one it saw, or a
     study's refined positions give each one's (``outcome.survey_sigma``)."""
     frame = pd.DataFrame(outcome.toa, columns=outcome.names)
@@ -82,6 +83,8 @@ def write_matrix(outcome: ToaOutcome, folder: Path, depth: np.ndarray | None = N
         table["clock_sigma_s"] = [f"{v:.6g}" for v in outcome.clock_sigma]
     if outcome.clock_mean is not None:
         table["clock_mean_sigma_s"] = [f"{v:.6g}" for v in outcome.clock_mean]
+    if outcome.rounding is not None:
+        table["rounding_sigma_s"] = [f"{v:.6g}" for v in outcome.rounding]
     if outcome.survey_sigma is not None:
         table["sigma_m"] = np.broadcast_to(np.asarray(outcome.survey_sigma, float), (len(outcome.names),))
     table.to_csv(receivers, index=False, float_format="%.4f")

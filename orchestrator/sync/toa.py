@@ -40,7 +40,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.at_once import heard_at_once
 from sblsim.models.sync.pings import build_pings, inferred_shortest, interval_seen, largest_travel_time
-from sblsim.models.sync.resolution import time_quantum
+from sblsim.models.sync.resolution import rounding_sigma, time_quantum
 from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.tables import NUMBER
@@ -81,7 +81,10 @@ class ToaOutcome:
     uncertainty (likewise), ``clock_mean`` (R,) [s] that error averaged over the tag's arrivals at it (the bias a
     still tag's pooled pings share: :meth:`~sblsim.orchestrator.sync.clocks.Clocks.averaged_sigma`; None where the
     synchronisation gives no edges' sigmas), ``survey_sigma`` [m per horizontal axis] the survey error the
-    synchronisation saw and took, or (R,) each receiver's position's error (on refined positions; None where none)."""
+    synchronisation saw and took, or (R,) each receiver's position's error (on refined positions; None where none),
+    ``rounding`` (R,) [s] the rounding σ of the tag's logged times at each receiver
+    (:func:`~sblsim.models.sync.resolution.rounding_sigma` of their :func:`~sblsim.models.sync.resolution.time_quantum`,
+    0 where finer than a millisecond: a still tag's verdict takes it)."""
 
     toa: np.ndarray
     names: list[str]
@@ -94,6 +97,7 @@ class ToaOutcome:
     clock_sigma: np.ndarray | None = None
     survey_sigma: float | np.ndarray | None = None
     clock_mean: np.ndarray | None = None
+    rounding: np.ndarray | None = None
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
@@ -273,8 +277,10 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     offset_sigma = None if clocks.clock_sigma is None else clocks.clock_sigma[[synced[n] for n in columns]]
     # and averaged over this tag's arrivals at each receiver (the bias a still tag's pooled pings share)
     mean = clocks.averaged_sigma([synced[n] for n in columns], toa)
+    raw = use["time"].to_numpy(float)  # each receiver's logged times' rounding (a still tag's verdict)
+    rounding = np.array([rounding_sigma(time_quantum(raw[receiver == k])) for k in range(len(columns))])
     return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
-                      clock_sigma=offset_sigma, clock_mean=mean)
+                      clock_sigma=offset_sigma, clock_mean=mean, rounding=rounding)
 
 
 def _sensors(use: pd.DataFrame, ping: np.ndarray, n_pings: int) -> dict[str, np.ndarray]:

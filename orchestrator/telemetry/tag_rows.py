@@ -43,7 +43,8 @@ def heard_columns(matrix: ToaOutcome) -> ToaOutcome:
     return replace(matrix, toa=matrix.toa[:, heard], names=names, positions=matrix.positions[heard],
                    summary=summary, toa_sigma=None if matrix.toa_sigma is None else matrix.toa_sigma[heard],
                    clock_sigma=None if matrix.clock_sigma is None else matrix.clock_sigma[heard],
-                   clock_mean=None if matrix.clock_mean is None else matrix.clock_mean[heard])
+                   clock_mean=None if matrix.clock_mean is None else matrix.clock_mean[heard],
+                   rounding=None if matrix.rounding is None else matrix.rounding[heard])
 
 
 def tracked_row(result, elapsed: float, row: dict[str, Any]) -> dict[str, Any]:

@@ -175,10 +175,10 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                                                                                    water_depth)
     survey = survey_sigmas(receivers, names, survey_sigma)
     considered_survey = survey_considered(survey, names, dim, survey_covariance)  # correlated where refined together
-    # each receiver's clock offset's own uncertainty from the synchronisation, and that averaged over the tag's
-    # arrivals (receivers.csv's clock_sigma_s, clock_mean_sigma_s): a still tag's verdict's and place's clock terms
-    clock_sigma, clock_mean = (None if v is None else v[[receivers.names.index(n) for n in names]]
-                               for v in (receivers.clock_sigma, receivers.clock_mean))
+    # each receiver's clock offset's own uncertainty, that averaged over the tag's arrivals and its times' rounding
+    # (receivers.csv's clock_sigma_s, clock_mean_sigma_s, rounding_sigma_s): a still tag's verdict's and place's terms
+    clock_sigma, clock_mean, rounding = (None if v is None else v[[receivers.names.index(n) for n in names]]
+                                         for v in (receivers.clock_sigma, receivers.clock_mean, receivers.rounding))
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
                                       water=water, still=motion == "stationary")  # a still tag's pings one place
@@ -287,7 +287,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     track_rows: dict[str, np.ndarray] = {}  # the robust track's pings, places, covariances, arrivals and marks
     if stationary:  # one place (or two, where it moved beyond its error terms: the rows from the change flagged)
         still = still_tag(toa, positions, c, (fx, fe, fc, fused), trusted, sigma, survey, speed, clock_sigma,
-                          clock_mean)
+                          clock_mean, rounding)
         rows("stationary", still.pings, still.emissions, still.places, still.covariances, still.heard, None,
              still.consider, _checked_against(still.corrected, toa, positions, c, sigma, depth, depth_sigma))
         motion_info |= still.summary | {"consider_terms": [term for term, known in (  # the speed's: where not fitted

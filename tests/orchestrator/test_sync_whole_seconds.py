@@ -163,3 +163,39 @@ def test_each_receiver_s_rounding_reaches_the_left_out_sync_tags_verdicts(sim, t
         assert len(given) == len(sim.positions), len(given)
         for rounding in given:
             np.testing.assert_allclose(rounding, np.full(len(sim.positions), expected), rtol=1e-9, atol=1e-12)
+
+
+def test_a_tag_s_matrix_carries_its_times_rounding_to_a_still_tag_s_verdict(sim, tmp_path, monkeypatch):
+    """``sblsim toa`` on hundredths writes each receiver's rounding σ (0.01 / √12 s) as ``receivers.csv``'s
+    ``rounding_sigma_s``, the tracker reads it and hands it to a still tag's verdict
+    (:func:`~sblsim.models.tracking.still_tag.still_tag`'s ``rounding``); the times to 0.1 µs write zeros; a value
+    beyond the coarsest rounding's σ is refused naming the column."""
+    from sblsim.orchestrator.readers.receivers_file import read_receivers
+    from sblsim.orchestrator.tracks import track as tracking
+
+    given = []
+
+    def still_tag(*args, **kwargs):
+        given.append(np.asarray(args[10], float).copy())
+        return real(*args, **kwargs)
+
+    real = tracking.still_tag
+    monkeypatch.setattr(tracking, "still_tag", still_tag)
+    for name, quantum, expected in (("hundredths", 0.01, 0.01 / np.sqrt(12.0)), ("fine", 0.0, 0.0)):
+        detections, receivers = _files(tmp_path / name, sim, quantum=quantum)
+        folder = tmp_path / name
+        assert main(["sync", str(detections), "--receivers", str(receivers), "--out", str(folder / "sync")]) == 0
+        assert main(["toa", str(detections), "--receivers", str(receivers), "--sync", str(folder / "sync"), "--tag",
+                     "S1", "--out", str(folder / "toa")]) == 0
+        table = pd.read_csv(folder / "toa" / "receivers.csv")
+        np.testing.assert_allclose(table["rounding_sigma_s"], expected, rtol=1e-5, atol=1e-12)
+        np.testing.assert_allclose(read_receivers(folder / "toa" / "receivers.csv").rounding, expected, rtol=1e-5,
+                                   atol=1e-12)
+        given.clear()
+        tracking.track(folder / "toa" / "toa.txt", folder / "toa" / "receivers.csv", motion="stationary")
+        assert len(given) == 1
+        np.testing.assert_allclose(given[0], expected, rtol=1e-5, atol=1e-12)
+    table["rounding_sigma_s"] = 30.0
+    table.to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(ModelError, match="rounding_sigma_s"):
+        read_receivers(tmp_path / "bad.csv")
