@@ -63,8 +63,9 @@ def test_a_still_tag_on_rounded_times_is_still_and_its_fixes_show_why():
 
 
 def test_a_tag_moved_on_rounded_times_is_still_flagged_from_the_move():
-    """A move of 30 m half way (two to three times the smallest step a single fix could see at the rounding's
-    σ): called moved with the rounding given, its rows flagged from within 3 pings of the move and none before it."""
+    """A move of 30 m half way (1.8 to 2.4 times the smallest step a single fix could see here, with the
+    rounding's σ a slow error too): called moved with the rounding given, its rows flagged from within 3 pings of
+    the move and none before it."""
     toa, places = _toa(11, moved=30.0)
     still = _verdict(toa, rounding_sigma(QUANTUM))
     assert still.summary["still"]["verdict"] == "moved", still.summary["still"]
