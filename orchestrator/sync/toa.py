@@ -100,6 +100,11 @@ class ToaOutcome:
     rounding: np.ndarray | None = None
 
 
+#: The fewest of a tag's times at a receiver whose own rounding is taken (:func:`build_toa`'s ``rounding``; fewer:
+#: the rounding of the tag's times at every receiver): ten times on a step's grid by chance, 10⁻¹⁰ for a decimal one.
+FEW_TIMES = 10
+
+
 def tags_present(detections: Detections, limit: int = 8) -> str:
     """The tags with the most detections, for a refusal's allowed values."""
     counts = detections.frame["tag"].value_counts()
@@ -277,8 +282,12 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     offset_sigma = None if clocks.clock_sigma is None else clocks.clock_sigma[[synced[n] for n in columns]]
     # and averaged over this tag's arrivals at each receiver (the bias a still tag's pooled pings share)
     mean = clocks.averaged_sigma([synced[n] for n in columns], toa)
-    raw = use["time"].to_numpy(float)  # each receiver's logged times' rounding (a still tag's verdict)
-    rounding = np.array([rounding_sigma(time_quantum(raw[receiver == k])) for k in range(len(columns))])
+    # each receiver's logged times' rounding (a still tag's verdict); a receiver with few of the tag's times, the
+    # tag's at every receiver (a few times may all be whole multiples of a coarser step by chance)
+    raw = use["time"].to_numpy(float)
+    whole = time_quantum(raw)
+    rounding = np.array([rounding_sigma(time_quantum(raw[receiver == k]) if (receiver == k).sum() >= FEW_TIMES
+                                        else whole) for k in range(len(columns))])
     return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
                       clock_sigma=offset_sigma, clock_mean=mean, rounding=rounding)
 
@@ -368,4 +377,4 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
 
 
 __all__ = ["FORMATS", "OPTION_NAMES", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build",
-           "build_toa", "header_line", "on_the_clocks", "tags_present"]
+           "build_toa", "FEW_TIMES", "header_line", "on_the_clocks", "tags_present"]

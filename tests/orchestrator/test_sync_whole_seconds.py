@@ -199,3 +199,25 @@ def test_a_tag_s_matrix_carries_its_times_rounding_to_a_still_tag_s_verdict(sim,
     table.to_csv(tmp_path / "bad.csv", index=False)
     with pytest.raises(ModelError, match="rounding_sigma_s"):
         read_receivers(tmp_path / "bad.csv")
+
+
+def test_a_receiver_with_few_of_a_tag_s_times_takes_the_tag_s_rounding(sim, tmp_path):
+    """Hundredths everywhere, but receiver R5 keeps three of tag S1's times, each a whole tenth (as three times of
+    hundredths are, one time in a thousand): its ``rounding_sigma_s`` is the tag's (0.01 / √12 s), not a tenth's;
+    every other receiver's its own."""
+    from sblsim.orchestrator.sync.toa import FEW_TIMES
+
+    detections, receivers = _files(tmp_path, sim, quantum=0.01)
+    assert main(["sync", str(detections), "--receivers", str(receivers), "--out", str(tmp_path / "sync")]) == 0
+    table = pd.read_csv(detections, dtype={"frac": str})
+    at = np.flatnonzero(((table["tag"] == "S1") & (table["serial"] == "R5")).to_numpy())
+    assert len(at) > FEW_TIMES
+    table = table.drop(index=at[3:])
+    frac = np.round(table.loc[at[:3], "frac"].astype(float).to_numpy(), 1)
+    assert (frac < 1.0).all()
+    table.loc[at[:3], "frac"] = [f"{v:.7f}" for v in frac]
+    table.to_csv(detections, index=False)
+    assert main(["toa", str(detections), "--receivers", str(receivers), "--sync", str(tmp_path / "sync"), "--tag",
+                 "S1", "--out", str(tmp_path / "toa")]) == 0
+    written = pd.read_csv(tmp_path / "toa" / "receivers.csv").set_index("name")["rounding_sigma_s"]
+    np.testing.assert_allclose(written.to_numpy(), 0.01 / np.sqrt(12.0), rtol=1e-5)
