@@ -376,5 +376,5 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     return outcome
 
 
-__all__ = ["FORMATS", "OPTION_NAMES", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome", "build",
-           "build_toa", "FEW_TIMES", "header_line", "on_the_clocks", "tags_present"]
+__all__ = ["FEW_TIMES", "FORMATS", "OPTION_NAMES", "SENSOR_COLUMNS", "SLOWEST_SOUND_SPEED", "TOLERANCE", "ToaOutcome",
+           "build", "build_toa", "header_line", "on_the_clocks", "tags_present"]
