@@ -207,6 +207,8 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     names = OPTION_NAMES | (options or {})
     j_sync, inside, times = on_the_clocks(use, clocks, synced)
     receiver = use["receiver"].map(column).to_numpy(np.int64)
+    raw = use["time"].to_numpy(float)
+    whole = time_quantum(raw)  # the tag's times' rounding (the pings' grouping, each receiver's rounding below)
     window = largest_travel_time(positions, SLOWEST_SOUND_SPEED) + TOLERANCE
     source = "given"
     if shortest is None:
@@ -218,7 +220,7 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     seen = None
     if source == "given":  # judged on the pings heard at once (the times' rounding added to the tolerance)
         at_once = heard_at_once(receiver[inside], times[inside], positions, SLOWEST_SOUND_SPEED,
-                                TOLERANCE + time_quantum(use["time"].to_numpy(float)))
+                                TOLERANCE + whole)
         rich = at_once.detections_heard_by(dim + 1)
         seen = interval_seen(receiver[inside][rich], times[inside][rich], window, shortest)
     said = None
@@ -284,10 +286,9 @@ def build_toa(detections: Detections, hydrophones: pd.DataFrame, clocks: Clocks,
     mean = clocks.averaged_sigma([synced[n] for n in columns], toa)
     # each receiver's logged times' rounding (a still tag's verdict); a receiver with few of the tag's times, the
     # tag's at every receiver (a few times may all be whole multiples of a coarser step by chance)
-    raw = use["time"].to_numpy(float)
-    whole = time_quantum(raw)
-    rounding = np.array([rounding_sigma(time_quantum(raw[receiver == k]) if (receiver == k).sum() >= FEW_TIMES
-                                        else whole) for k in range(len(columns))])
+    counts = np.bincount(receiver, minlength=len(columns))
+    rounding = np.array([rounding_sigma(time_quantum(raw[receiver == k]) if counts[k] >= FEW_TIMES else whole)
+                         for k in range(len(columns))])
     return ToaOutcome(toa - origin, columns, positions, table_pings, summary, origin, toa_sigma=noise,
                       clock_sigma=offset_sigma, clock_mean=mean, rounding=rounding)
 
