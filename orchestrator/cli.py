@@ -16,6 +16,7 @@ import sys
 from sblsim.orchestrator.io.memory import arrow_pool
 from sblsim.orchestrator.io.stop import (
     SIGNAL_STATUS_BASE,
+    end_on_further_signals,
     ending,
     exit_past_threads,
     exit_status,
@@ -113,9 +114,11 @@ def main(argv: list[str] | None = None) -> int:
 def run(argv: list[str] | None = None) -> None:
     """The ``sblsim`` console script and ``python -m sblsim.orchestrator.cli``: :func:`main`, then the process's exit
     with its status; a command a stop ended does not wait for good on a thread a library left running
-    (:func:`~sblsim.orchestrator.io.stop.exit_past_threads`)."""
+    (:func:`~sblsim.orchestrator.io.stop.exit_past_threads`), and a further signal while it ends ends it at once with
+    the stop's status (:func:`~sblsim.orchestrator.io.stop.end_on_further_signals`)."""
     status = main(argv)
     if status > SIGNAL_STATUS_BASE:  # a stop's status (128 + the signal); a command's own are 0, 1 and 2
+        end_on_further_signals(status)
         exit_past_threads(status)
     sys.exit(status)
 

@@ -16,7 +16,8 @@ A signal a parent process set to be ignored (``nohup``'s SIGHUP, a background jo
 Python API installs no handler: its callers' own handling of signals is theirs. A worker process a command starts
 (a pool's, a Dask cluster's) ignores Ctrl-C (:func:`workers_ignore_ctrl_c`): a terminal sends it to the whole
 process group, and the command stops its workers itself. Once a stopped command has said its line, the process does
-not wait for good on a thread a library left running (:func:`exit_past_threads`).
+not wait for good on a thread a library left running (:func:`exit_past_threads`), and a further signal ends it at
+once with the stop's status (:func:`end_on_further_signals`).
 """
 
 from __future__ import annotations
@@ -126,12 +127,31 @@ def exit_past_threads(status: int, grace: float | None = None) -> None:
     for thread in lingering():
         thread.join(max(0.0, deadline - time.monotonic()))
     if lingering():
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):  # a closed pipe, a closed stream: nothing more to say there
-                pass
-        os._exit(status)
+        _exit_now(status)
+
+
+def _exit_now(status: int) -> None:
+    """End the process at once with ``status`` (``os._exit``), the standard streams flushed first."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe, a closed stream: nothing more to say there
+            pass
+    os._exit(status)
+
+
+def end_on_further_signals(status: int) -> None:
+    """In a command's process that a stop ended (its outputs cleaned, its line said), before the interpreter's exit:
+    a further stop signal (Ctrl-C pressed again while the process ends, a signal sent twice) ends the process at once
+    with ``status``, the standard streams flushed first. Python's own handlers, restored by :func:`stop_on`, would
+    raise a KeyboardInterrupt through the exit instead: its traceback, and a process ended by SIGINT (130 to a shell)
+    where the stop said 143 or 129. The main thread only; a signal the process ignores stays ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for name in SIGNALS:
+        number = getattr(signal, name, None)
+        if number is not None and signal.getsignal(number) is not signal.SIG_IGN:
+            signal.signal(number, lambda signum, frame: _exit_now(status))
 
 
 @contextmanager
@@ -187,5 +207,6 @@ def _quiet_stop(previous):
     return hook
 
 
-__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "THREADS_GRACE", "check", "deferred", "ending",
-           "exit_past_threads", "exit_status", "is_stop", "pending", "stop_on", "workers_ignore_ctrl_c"]
+__all__ = ["EXIT_INTERRUPTED", "SIGNALS", "SIGNAL_STATUS_BASE", "THREADS_GRACE", "check", "deferred",
+           "end_on_further_signals", "ending", "exit_past_threads", "exit_status", "is_stop", "pending", "stop_on",
+           "workers_ignore_ctrl_c"]

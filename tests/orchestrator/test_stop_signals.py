@@ -36,8 +36,9 @@ WITHIN = 5.0
 #: conversion (casadi's typecheck calls the argument's ``__DM__``) sends the process the signal, so that the handler
 #: runs inside ``Function_call``; ``spin``: the box-in's lever arm (casadi, a map over 2000 attitudes) in a loop,
 #: ``ready`` printed before it; ``linger``: a thread started that never ends (as a library's can be left stuck),
-#: then a loop. Each prints the type of the exception that came out of the work. Run as the console script runs
-#: (``cli.run``), its grace for lingering threads 0.3 s.
+#: then a loop; ``again``: stopped by SIGTERM, a thread it started sends the process the signal again 0.2 s later
+#: (while its end waits for that thread). Each prints the type of the exception that came out of the work. Run as the
+#: console script runs (``cli.run``), its grace for lingering threads 0.3 s.
 CHILD = textwrap.dedent('''
     import os, signal, sys, threading, time, types
     import numpy as np
@@ -73,6 +74,14 @@ CHILD = textwrap.dedent('''
             except BaseException as exc:
                 print(type(exc).__name__, flush=True)
                 raise
+
+    def again(args):
+        def late():
+            time.sleep(0.2)
+            print("sent", flush=True)
+            os.kill(os.getpid(), signum)  # a second signal while the stopped process ends
+        threading.Thread(target=late, name="late").start()
+        signal.raise_signal(signal.SIGTERM)
 
     def linger(args):
         threading.Thread(target=threading.Event().wait, name="stuck").start()  # a library's, that never ends
@@ -120,6 +129,18 @@ def test_a_stopped_command_does_not_wait_for_good_on_a_stuck_thread(tmp_path):
     assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
     assert err.splitlines() == ["sblsim: interrupted"], err
     assert 0.3 <= took < WITHIN, took
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_second_signal_while_a_stopped_command_ends_keeps_its_status(tmp_path, name):
+    """Stopped by SIGTERM, then signalled again while its process ends (a second Ctrl-C, a signal sent twice): the
+    process ends at once with the stop's 143 and its one line, where Python's own handlers, back after the command,
+    raised a KeyboardInterrupt through the exit (its traceback, the process ended by SIGINT) or let SIGTERM kill it."""
+    proc = _child(tmp_path, "again", SIGNALS[name])
+    out, err = proc.communicate(timeout=120)
+    assert out.split() == ["sent"], (out, err)  # the second signal was sent before the process ended
+    assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err)
+    assert err.splitlines() == ["sblsim: interrupted"], err
 
 
 @pytest.mark.slow
