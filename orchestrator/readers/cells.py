@@ -340,6 +340,30 @@ def pattern(values: pd.Series, regex: re.Pattern, what: str, name: str, lines: l
     return cells
 
 
+#: A whole number written as a decimal (``802357.0``): a spreadsheet's or pandas' number column with blank cells (a
+#: float column) written to CSV.
+DECIMAL_WHOLE = re.compile(r"[0-9]+\.0+")
+
+
+def whole_ids(cells: pd.Series) -> tuple[pd.Series, int]:
+    """An id column's cells with each whole number written as a decimal (:data:`DECIMAL_WHOLE`: ``802357.0``) read
+    as the whole number (``802357``), and how many were.
+
+    A sheet's column of sync tags or serials with blank cells is a float column to pandas and to a spreadsheet, which
+    write ``802357.0`` where the receivers logged ``802357``; no transmitter's or receiver's id ends in ``.0``. Every
+    reader of an id (a sheet's and a detections table's) reads it so, so that the two still name one tag alike.
+
+    Parameters
+    ----------
+    cells : pandas.Series
+        (n,) the column's stripped cells (text).
+    """
+    decimal = per_value(cells, lambda v: v.str.fullmatch(DECIMAL_WHOLE.pattern).fillna(False)).to_numpy(bool)
+    if not decimal.any():
+        return cells, 0
+    return cells.where(~decimal, cells.str.replace(r"\.0+$", "", regex=True)), int(decimal.sum())
+
+
 def numbers(values: pd.Series, what: str, name: str, lines: list[int], column: str, low: float, high: float,
             high_open: bool = False, missing: bool = False, unit: str = "") -> np.ndarray:
     """The cells of one column as floats, each a number (:data:`NUMBER`), finite, in [low, high] (``[low, high)``
@@ -427,6 +451,6 @@ def shown_header(header: list[str]) -> str:
     return ",".join(h[:20] for h in header[:12]) + (",..." if len(header) > 12 else "")
 
 
-__all__ = ["SEPARATORS", "TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "file_table", "named",
-           "normal_name", "numbers", "pattern", "per_value", "read_text", "refuse", "shown_header", "tail_text",
-           "text_table", "too_large", "trimmed", "units_row"]
+__all__ = ["DECIMAL_WHOLE", "SEPARATORS", "TAIL_CHARS", "UNITS", "UNIT_NAME", "column", "cut_short", "file_table",
+           "named", "normal_name", "numbers", "pattern", "per_value", "read_text", "refuse", "shown_header",
+           "tail_text", "text_table", "too_large", "trimmed", "units_row", "whole_ids"]

@@ -61,6 +61,7 @@ from sblsim.orchestrator.readers.cells import (
     pattern,
     shown_header,
     units_row,
+    whole_ids,
 )
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE
 from sblsim.orchestrator.readers.transmitters import TRANSMITTER
@@ -285,6 +286,8 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     body, lines = _with_serial(body, lines, header[index["serial"]], index["serial"], name, what, notes)
     serial = pattern(body[index["serial"]], IDENTIFIER, what, name, lines, header[index["serial"]],
                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
+    serial, decimals = whole_ids(serial)
+    wholes = {header[index["serial"]]: decimals}  # each id column's whole numbers written as decimals
 
     def text(key: str, regex=None, allowed: str = "") -> np.ndarray:
         if index[key] is None:
@@ -294,6 +297,9 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
             given = (cells != "").to_numpy()
             pattern(cells[given], regex, what, name, [lines[k] for k in np.flatnonzero(given)], header[index[key]],
                     allowed)
+        if key == "sync_tag":
+            cells, count = whole_ids(cells)
+            wholes[header[index[key]]] = count
         return cells.str.slice(0, 80).to_numpy(dtype=object)
 
     def values(key: str, low: float, high: float, unit: str, missing: bool = True) -> np.ndarray:
@@ -361,6 +367,10 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
                                                   f"{what}: {name!r}", lines,
                                                   None if index["bottom"] is None else header[index["bottom"]]),
                           "line": np.asarray(lines, np.int64)})
+    for key, count in wholes.items():
+        if count:
+            notes.append(f"{count:,} cells of {key} read as whole numbers (802357.0 as 802357: a number column with "
+                         "blank cells, as a spreadsheet or pandas writes it)")
     _check_overlaps(table, "serial", "receiver", name, what)
     _check_overlaps(table[table["sync_tag"] != ""], "sync_tag", "sync tag", name, what)
     order = table.sort_values(["serial", "start"], kind="stable")

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.declarations import ModelError
-from sblsim.orchestrator.readers.cells import column, file_table, numbers, pattern
+from sblsim.orchestrator.readers.cells import column, file_table, numbers, pattern, whole_ids
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_COORDINATE, MAX_HYDROPHONES
 
 
@@ -51,6 +51,7 @@ def read_hydrophones(path: Path | str) -> pd.DataFrame:
                  "a tag id of 1 to 40 letters, digits, '.', '_' or '-', or empty")
     else:
         tags = pd.Series([""] * len(body))
+    (receivers, _), (tags, _) = whole_ids(receivers), whole_ids(tags)  # 802357.0 as 802357, as the detections read it
     frame = pd.DataFrame({"receiver": receivers.to_numpy(), "sync_tag": tags.to_numpy()})
     for axis, k in zip("xyz", axes):
         frame[axis] = np.nan if k is None else numbers(body[k], what, name, lines, header[k], -MAX_COORDINATE,

@@ -51,6 +51,7 @@ from sblsim.orchestrator.readers.cells import (
     pattern,
     refuse,
     shown_header,
+    whole_ids,
 )
 from sblsim.orchestrator.readers.deployments import DEPTH_RANGE, _blank
 from sblsim.orchestrator.readers.otn_tags import otn_table, releases
@@ -265,6 +266,7 @@ def tag_table(header: list[str], body: pd.DataFrame, lines: list[int], path: Pat
         raise ModelError(f"{what}: {name!r} holds a header and no transmitters")
     transmitter = pattern(body[index["transmitter"]], TRANSMITTER, what, name, lines, header[index["transmitter"]],
                           "a transmitter's full ID (A69-1602-4555) or id")
+    transmitter = whole_ids(transmitter)[0]  # 4555.0 as 4555, as the detections read it
     twice = transmitter[transmitter.duplicated()]
     if len(twice):
         raise ModelError(f"{what}: {name!r} line {lines[int(twice.index[0])]}: transmitter {twice.iloc[0]} is listed "

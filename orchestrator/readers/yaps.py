@@ -12,7 +12,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.times import utc_seconds
-from sblsim.orchestrator.readers.cells import column, numbers, pattern, refuse, shown_header
+from sblsim.orchestrator.readers.cells import column, numbers, pattern, refuse, shown_header, whole_ids
 from sblsim.orchestrator.readers.limits import IDENTIFIER, MAX_EPOCH
 
 #: Whole seconds since 1970 (``epo``).
@@ -46,6 +46,7 @@ def yaps(header: list[str], body: pd.DataFrame, lines: list[int], name: str, wha
                    "an id of 1 to 40 letters, digits, '.', '_' or '-'")
     serial = pattern(body[index["serial"]], IDENTIFIER, what, name, lines, "serial",
                       "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
+    (tag, _), (serial, _) = whole_ids(tag), whole_ids(serial)  # 802357.0 as 802357, as the sheets read it
     frame = pd.DataFrame({"receiver": serial.to_numpy(), "tag": tag.to_numpy(), "code_space": "", "time": time,
                           "sensor_value": np.full(len(body), np.nan), "sensor_unit": ""})
     used |= {index["tag"], index["serial"]}
