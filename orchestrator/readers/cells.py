@@ -350,7 +350,7 @@ def whole_ids(cells: pd.Series) -> tuple[pd.Series, int]:
     as the whole number (``802357``), and how many were.
 
     A sheet's column of sync tags or serials with blank cells is a float column to pandas and to a spreadsheet, which
-    write ``802357.0`` where the receivers logged ``802357``; no transmitter's or receiver's id ends in ``.0``. Every
+    write ``802357.0`` where the receivers logged ``802357`` (no receiver logs an id of digits as a decimal). Every
     reader of an id (a sheet's and a detections table's) reads it so, so that the two still name one tag alike.
 
     Parameters

@@ -63,6 +63,11 @@ RESET_GAP = 86400.0
 NEVER_HEARD = "sync tags never heard"
 
 
+class SyncTagsUnheard(ModelError):
+    """Detections holding fewer than two of the receivers table's sync tags' (an extract of a tag project holds its own
+    tags alone): a refusal of the synchronisation that a study takes as clocks not synchronised, said."""
+
+
 @dataclass
 class SyncOutcome:
     """What :func:`synchronise` computed: ``summary`` (``sync.json``), ``offsets``, ``residuals`` and
@@ -278,7 +283,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     # a season's other columns never copied; rows that are all the sync tags' (a study's) not copied at all
     sync = frame if pick.all() and held == list(frame.columns) else frame.loc[pick, held]
     if len(sync) < 2:
-        raise ModelError("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
+        raise SyncTagsUnheard("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
                          "detections in which receivers hear the sync tags named in the table's sync_tag column")
     receiver = sync["receiver"].map(index).to_numpy(np.int64)
     tag = sync["tag"].map(tag_index).to_numpy(np.int64)
@@ -488,4 +493,5 @@ def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int],
             if (r["receiver"], r["clock_part"]) in named}
 
 
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SYNC_COLUMNS", "SyncOutcome", "corrected_times", "synchronise"]
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SYNC_COLUMNS", "SyncOutcome", "SyncTagsUnheard", "corrected_times",
+           "synchronise"]

@@ -1,7 +1,7 @@
 """A telemetry study's clocks (:func:`study_clocks`): a synchronisation's folder given (its ``offsets.csv``, its
 refined positions and their errors where it has them); else synchronised here from the deployments' sync tags
-(:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag or the times are too
-coarse, taken as logged (said).
+(:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag, the detections hold
+none of them or the times are too coarse, taken as logged (said).
 """
 
 from __future__ import annotations
@@ -13,12 +13,14 @@ import numpy as np
 from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
-from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
+from sblsim.orchestrator.sync.run import NEVER_HEARD, SyncTagsUnheard, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
+#: The clocks' source where the deployments name sync tags the detections do not hold.
+UNHEARD = "as logged (no sync tag heard)"
 
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
@@ -50,7 +52,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"} | (
             {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}) | (
             {} if each is None else {"position_sigma_m": each}), None
-    rounded = None
+    rounded = unheard = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:
             outcome = synchronise(assigned.detections, table, sound_speed, series, bin_hours,
@@ -58,6 +60,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                                   survey_sigma=survey_sigma, take_seen=take_seen, release_rows=release_rows)
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
+        except SyncTagsUnheard:  # the sync tags named, none heard (a tag project's extract): as with none named
+            unheard = sorted(set(table["sync_tag"]) - {""})
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
@@ -77,9 +81,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
     notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
                  "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
+                 f"none of the deployments' {len(unheard)} sync tags ({', '.join(unheard[:6])}"
+                 f"{', ...' if len(unheard) > 6 else ''}) is heard twice in the detections (an extract of a tag "
+                 "project holds its own tags alone): the receivers' clocks are taken as logged (synchronised "
+                 "already); give the raw detections with the sync tags' or --sync DIR where they are not"
+                 if unheard else
                  "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
-    source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone
+    source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone else UNHEARD if unheard
               else "as logged (no sync tag)")
     return logged_clocks(table["receiver"].tolist(), float(np.floor(first)), float(np.ceil(last))), \
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
@@ -100,4 +109,4 @@ def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict
     return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
-__all__ = ["TOO_COARSE", "study_clocks", "taken_survey"]
+__all__ = ["TOO_COARSE", "UNHEARD", "study_clocks", "taken_survey"]

@@ -83,3 +83,4 @@ def test_a_receivers_table_saved_by_pandas(tmp_path):
     pd.testing.assert_frame_equal(own, saved)
     sync_tags = own["sync_tag"][own["sync_tag"] != ""]
     assert len(sync_tags) and np.isin(sync_tags, pd.read_csv(DATA / "tags.csv")["transmitter"].astype(str)).all()
+
