@@ -9,7 +9,12 @@ refuses in one line naming the format and the export that makes the CSV sblsim r
 * **VDAT** (first bytes ``VDAT``; extension ``.vdat``): the log of Innovasea's current receivers (HR2, NexTrak) as
   Fathom Connect offloads it; VUE does not read it. Read from Fathom Connect's CSV export (the same converter).
 * **Workbooks**: an ``.xls`` (a BIFF8 workbook in an OLE2 compound document, first bytes ``D0 CF 11 E0 A1 B1 1A
-  E1``) and an ``.xlsx`` (a zip archive of XML parts, first bytes ``PK 03 04``).
+  E1``) and an ``.xlsx`` (a zip archive of XML parts, first bytes ``PK 03 04``, its first part one of the Office Open
+  XML package's: ECMA-376 Part 2, the Open Packaging Conventions).
+* **Archives**: an OpenDocument spreadsheet (a zip archive whose first file is ``mimetype``), any other zip archive
+  (as OTN and GLATOS hand out their extracts: a CSV zipped), named with its first file (read from its first local
+  header, PKWARE's APPNOTE § 4.3.7), and a gzip file (first bytes ``1F 8B``, RFC 1952): refused as text, saying to
+  extract the CSV first. Nothing is extracted.
 
 Sources: the example logs glatos ships (``inst/extdata/detection_files_raw``: five VRL files of four receiver
 models and one HR2 VDAT file) and glatos's ``vdat_convert`` and ``vue_convert`` (the conversions).
@@ -33,6 +38,10 @@ LOGS = {
 #: A workbook's first bytes: an .xls (an OLE2 compound document) and an .xlsx (a zip archive).
 XLS_MAGIC = bytes.fromhex("d0cf11e0a1b11ae1")
 XLSX_MAGIC = b"PK\x03\x04"
+#: A gzip file's first bytes (RFC 1952 § 2.3.1).
+GZIP_MAGIC = b"\x1f\x8b"
+#: The first part of an Office Open XML package (a workbook) is one of these, or under one of these folders.
+OOXML_PARTS = ("[Content_Types].xml", "_rels/", "docProps/", "xl/", "customXml/")
 #: The bytes read to tell a file's kind.
 HEAD_BYTES = 8
 
@@ -91,6 +100,16 @@ def not_text(name: str, what: str, data: bytes, nul: int) -> ModelError:
     """The one line refusing a file that holds a NUL byte at ``nul``: a workbook named as one (to be saved as CSV),
     else a binary file."""
     kind = kind_of(data[:HEAD_BYTES])
+    first = zip_first_name(data) if kind == "xlsx" else None
+    if first == "mimetype":  # an OpenDocument package's first file (ODF 1.2 Part 3 § 3.3): a spreadsheet's
+        return ModelError(f"{what}: {name!r} is an OpenDocument spreadsheet (.ods), not CSV text; allowed: CSV text "
+                          "(its sheet saved as CSV)")
+    if first is not None and not first.startswith(OOXML_PARTS):
+        return ModelError(f"{what}: {name!r} is a zip archive (its first file {first!r}), not CSV text; allowed: CSV "
+                          "text (the archive's CSV extracted first)")
+    if data.startswith(GZIP_MAGIC):
+        return ModelError(f"{what}: {name!r} is gzip-compressed, not CSV text; allowed: CSV text (the file "
+                          "decompressed first: gunzip)")
     if kind in ("xls", "xlsx"):
         return ModelError(f"{what}: {name!r} is an Excel workbook (.{kind}), not CSV text; allowed: CSV text (its "
                           "sheet saved as CSV)")
@@ -98,6 +117,19 @@ def not_text(name: str, what: str, data: bytes, nul: int) -> ModelError:
         return ModelError(f"{what}: {name!r} is UTF-16 text (as a spreadsheet's 'Unicode Text' saves it), not "
                           "UTF-8; allowed: CSV text in UTF-8 (save it as 'CSV UTF-8')")
     return ModelError(f"{what}: {name!r} holds a NUL byte (byte {nul}); allowed: CSV text")
+
+
+def zip_first_name(head: bytes) -> str | None:
+    """The name of a zip archive's first file, from the local header its first bytes hold (signature ``PK 03 04``,
+    the name's length at byte 26, the name from byte 30: PKWARE's APPNOTE § 4.3.7), shown safely (80 characters at
+    most, each not printable as ``?``); None where ``head`` holds no whole local header."""
+    if not head.startswith(XLSX_MAGIC) or len(head) < 30:
+        return None
+    length = int.from_bytes(head[26:28], "little")
+    if length == 0 or len(head) < 30 + length:
+        return None
+    text = head[30:30 + length].decode("utf-8", errors="replace")[:80]
+    return "".join(c if c.isprintable() else "?" for c in text)
 
 
 def utf16(head: bytes) -> bool:
@@ -114,5 +146,5 @@ def utf16(head: bytes) -> bool:
     return False
 
 
-__all__ = ["HEAD_BYTES", "LOGS", "XLSX_MAGIC", "XLS_MAGIC", "first_bytes", "kind_of", "log_refused", "not_text",
-           "refuse_log", "utf16"]
+__all__ = ["GZIP_MAGIC", "HEAD_BYTES", "LOGS", "OOXML_PARTS", "XLSX_MAGIC", "XLS_MAGIC", "first_bytes", "kind_of",
+           "log_refused", "not_text", "refuse_log", "utf16", "zip_first_name"]

@@ -58,3 +58,46 @@ def test_a_workbook_where_csv_is_read_is_named(tmp_path, magic, kind):
     path.write_bytes(magic + b"\x00" * 64)
     assert f"is an Excel workbook (.{kind}), not CSV text; allowed: CSV text (its sheet saved as CSV)" in \
         _message("receivers", path)
+
+
+def _zipped(path, members):
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, text in members:
+            archive.writestr(name, text)
+    return path
+
+
+@pytest.mark.parametrize("reader", ["detections", "sniffed detections", "receivers", "sound speed"])
+def test_an_archive_is_named_as_one_and_nothing_extracted(tmp_path, reader):
+    """A zipped CSV (as OTN and GLATOS hand out their extracts) and a gzipped one, given where CSV text is read: each
+    named as what it is, with the file the zip holds first, where before a zip was called an Excel workbook and a gzip
+    file said to hold a NUL byte; a real workbook is still named a workbook, and an OpenDocument spreadsheet one."""
+    import gzip
+
+    import openpyxl
+
+    text = "Date and Time (UTC),Receiver,Transmitter\n2024-06-03 00:01:00.742,VR2AR-461000,A69-1601-60001\n"
+    zipped = _zipped(tmp_path / "extract.zip", [("proj_matched_detections_2024.csv", text), ("README.txt", "x")])
+    message = _message(reader, zipped)
+    assert f"'{zipped}' is a zip archive (its first file 'proj_matched_detections_2024.csv'), not CSV text; " \
+           "allowed: CSV text (the archive's CSV extracted first)" in message, message
+    (tmp_path / "extract.csv.gz").write_bytes(gzip.compress(text.encode()))
+    message = _message(reader, tmp_path / "extract.csv.gz")
+    assert "is gzip-compressed, not CSV text" in message and "NUL" not in message, message
+    book = openpyxl.Workbook()
+    book.save(tmp_path / "sheet.xlsx")
+    assert "is an Excel workbook (.xlsx)" in _message(reader, tmp_path / "sheet.xlsx")
+    ods = _zipped(tmp_path / "sheet.ods", [("mimetype", "application/vnd.oasis.opendocument.spreadsheet"),
+                                           ("content.xml", "<x/>")])
+    assert "is an OpenDocument spreadsheet (.ods), not CSV text" in _message(reader, ods)
+
+
+def test_an_archive_s_hostile_first_name_is_shown_safely(tmp_path):
+    """A zip whose first file's name holds control characters, a line end and 300 characters: said in one line, 80
+    characters of the name at most, each not printable as '?'."""
+    name = "a\nb\x1b[31mred\x07" + "x" * 300
+    message = _message("detections", _zipped(tmp_path / "odd.zip", [(name, "t")]))
+    shown = message.split("its first file ", 1)[1].split("), not CSV text", 1)[0]
+    assert shown == repr(("a?b?[31mred?" + "x" * 300)[:80]), shown
