@@ -1,7 +1,9 @@
 """Each detection at the deployment that logged it (:func:`assign`): by the receiver's serial and the detection's time
 (on the receiver's clock, seconds off at most, against deployments days long); detections before a deployment, after
 its recovery, between two, or at a serial the table does not list are set aside and counted, never used. A sync tag
-deployed more than once is one sync tag per deployment."""
+deployed more than once is one sync tag per deployment. A sheet's serial given with the receiver's model
+(``VR2AR-461000``, as VUE names a receiver) is the serial the detections' readers keep (``461000``) where no
+detection names it whole (:func:`serials_as_logged`)."""
 
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import Detections
-from sblsim.orchestrator.readers.transmitters import match, split
+from sblsim.orchestrator.readers.transmitters import after_last_dash, match, split
 
 #: The reasons a detection is set aside, in :attr:`Assigned.set_aside`'s keys.
 SET_ASIDE = ("receiver_not_in_table", "outside_deployment", "sync_tag_outside_deployment")
@@ -114,6 +116,35 @@ def assign(detections: Detections, deployments: Deployments, detected: Any = Non
     return Assigned(replace(detections, frame=kept), hydrophones, set_aside, keep)
 
 
+def serials_as_logged(deployments: Deployments, logged: Any) -> tuple[Deployments, str | None]:
+    """The deployments with each serial given with the receiver's model (``VR2AR-461000``: VUE's and Fathom's name of
+    a receiver, which their readers cut to the serial) taken as the serial alone (``461000``) where no detection
+    names it whole, the detections name that serial, and no other of the sheet's serials is it or becomes it; and the
+    note saying so (None where none is).
+
+    Parameters
+    ----------
+    deployments : Deployments
+    logged : iterable of str
+        The receivers (serials) the detections name (every batch's: a store's whole list).
+    """
+    table = deployments.table
+    logged = set(map(str, logged))
+    given = table["serial"].astype(str)
+    tail = after_last_dash(given)
+    candidate = ~given.isin(logged) & tail.isin(logged) & (tail != given) & ~tail.isin(set(given))
+    sources = given[candidate].groupby(tail[candidate]).nunique()  # one serial of the sheet per serial logged
+    candidate &= tail.map(sources).eq(1)
+    if not candidate.any():
+        return deployments, None
+    table = table.copy()
+    table.loc[candidate, "serial"] = tail[candidate]
+    first = int(np.flatnonzero(candidate.to_numpy())[0])
+    note = (f"{int(given[candidate].nunique()):,} serials of {deployments.source} given with the receiver's model "
+            f"({given.iloc[first]}, ...) taken as the serials the detections name ({tail.iloc[first]}, ...)")
+    return replace(deployments, table=table, notes=[*deployments.notes, note]), note
+
+
 def nothing_kept(source: str, serials, deployments: Deployments) -> ModelError:
     """The refusal of detections none of which is inside a deployment (one line naming the serials detected, those
     of the table and what is allowed)."""
@@ -123,4 +154,4 @@ def nothing_kept(source: str, serials, deployments: Deployments) -> ModelError:
                       "detections at the table's receivers between their deployment and recovery")
 
 
-__all__ = ["Assigned", "SET_ASIDE", "assign", "nothing_kept"]
+__all__ = ["Assigned", "SET_ASIDE", "assign", "nothing_kept", "serials_as_logged"]

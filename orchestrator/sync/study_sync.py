@@ -18,7 +18,7 @@ from sblsim.models.sync.resolution import resolution_warning
 from sblsim.models.sync.scale import NOMINAL_SOUND_SPEED
 from sblsim.models.sync.windows import WINDOW_DAYS
 from sblsim.orchestrator.io.memory import arrow_pool, emptied
-from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.assign import assign, serials_as_logged
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import in_water
@@ -57,6 +57,7 @@ def synchronise_study(detections: Detections, deployments, sound_speed: float | 
     ModelError
         As :func:`synchronise`, or no detection inside a deployment.
     """
+    deployments = serials_as_logged(deployments, detections.frame["receiver"].unique())[0]  # VR2AR-461000: 461000
     array = in_water(detections, assign(detections, deployments), deployments)  # the deployments that logged it
     deployments, assigned = array.deployments, array.assigned
     if options.get("release_rows"):  # the rows as read let go too: the assigned ones are the synchronisation's

@@ -45,7 +45,7 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.frames import Frame
 from sblsim.orchestrator.io.tables import NUMBER
 from sblsim.orchestrator.io.times import iso_utc
-from sblsim.orchestrator.readers.assign import assign
+from sblsim.orchestrator.readers.assign import assign, serials_as_logged
 from sblsim.orchestrator.readers.burst_sequence import read_burst_sequence
 from sblsim.orchestrator.readers.deployments import read_deployments
 from sblsim.orchestrator.readers.detections import FORMATS as DETECTION_FORMATS
@@ -350,6 +350,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     shortest = _shortest(ping_type, interval, sequence)
     deployments = read_deployments(receivers, crs, frame)
     read = read_any(detections, format, tags=[tag])  # (of a store, the tag's rows alone)
+    deployments = serials_as_logged(deployments, read.frame["receiver"].unique())[0]  # as the sync took them
     array = in_water(read, assign(read, deployments), deployments)  # as the synchronisation took them
     deployments, assigned = array.deployments, array.assigned
     data, table = assigned.detections, assigned.hydrophones

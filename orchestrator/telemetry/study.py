@@ -49,6 +49,7 @@ from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.orchestrator.io.memory import arrow_pool, emptied, release, spilled
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.io.times import iso_utc
+from sblsim.orchestrator.readers.assign import serials_as_logged
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.detections import Detections
 from sblsim.orchestrator.readers.in_water import counted_in_water
@@ -277,6 +278,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     deployments, data, sheet, notes = read_study(files, format, crs, frame, tz, detections=not stored)
     source = StudyDetections.stored(files.detections[0], format) if stored else StudyDetections(data)
     data = source.data
+    deployments, said = serials_as_logged(deployments, source.receivers())  # VR2AR-461000 as 461000
+    notes.extend([said] if said else [])
     series = read_sound_speed(sound_speed_file) if sound_speed_file is not None else None
     if temperature_path is not None:  # refused here in one line, not once per tag
         read_temperature_series(temperature_path, 0.0, absolute=True)

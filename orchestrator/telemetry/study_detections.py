@@ -155,6 +155,10 @@ class StudyDetections:
         empty = read_any(path, format, tags=())
         return cls(empty, Store(path))
 
+    def receivers(self) -> list[str]:
+        """The receivers (serials) the detections name: the store's, or those of the rows read."""
+        return self.store.receivers if self.store is not None else self.data.frame["receiver"].unique().tolist()
+
     def batches(self, names: Sequence[str]) -> list[list[str]]:
         """The store's tags ``names`` in batches of at most :data:`BATCH_ROWS` detections (by the store's count of
         each), in the store's order of tags (its row groups': a batch reads few of them)."""
