@@ -45,6 +45,14 @@ TIME_SPAN = "a time from 1970-01-01 to 2262-04-11T23:47:16 (UTC: the latest a 64
 ALLOWED = ("an ISO 8601 time (2023-08-31T21:15:42.123Z; UTC unless a zone is given) or epoch seconds "
            "(1693516542.123)")
 
+#: A spreadsheet's date as a locale shows it (``6/3/2024 0:01``, ``03.06.2024 00:01:07``): day and month in the
+#: locale's order, the seconds' fraction (often the seconds) dropped when the file was opened and saved again.
+SPREADSHEET_DATE = re.compile(r"[0-9]{1,2}[/.][0-9]{1,2}[/.][0-9]{2,4}(?: [0-9]{1,2}:[0-9]{2}(?::[0-9]{2})?"
+                              r"(?: ?[AaPp][Mm])?)?")
+#: What a refusal of such a date adds.
+SPREADSHEET_SAID = ("; this is a spreadsheet's date (the file opened and saved again: its day and month in the "
+                    "locale's order, its seconds' fraction dropped): give the file as exported")
+
 
 def _refuse(where: str, line: int, column: str, text: str, allowed: str = ALLOWED) -> ModelError:
     shown = text if len(text) <= 40 else text[:40] + "..."
@@ -141,6 +149,7 @@ def utc_seconds(cells: pd.Series | Sequence[str], where: str, lines: Sequence[in
             if not iso.all():
                 k = int(given.index[np.flatnonzero(~iso)[0]])
                 allowed = ALLOWED + (" (one form per column)" if given.str.fullmatch(EPOCH.pattern).any() else "")
+                allowed += SPREADSHEET_SAID if SPREADSHEET_DATE.fullmatch(text[k]) else ""
                 raise _refuse(where, lines[k], column, text[k], allowed)
             normal = given.str.replace(",", ".", regex=False).str.replace(r" ?UTC$", "Z", regex=True)
             normal = normal.str.replace(r"(?<=[0-9]) (?=[Z+-])", "", regex=True)
@@ -200,5 +209,5 @@ def parse_instant(value: str | float | int, where: str) -> float:
         raise ModelError(f"{where}: {text[:40]!r} is not allowed; allowed: {ALLOWED}") from None
 
 
-__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "PLAIN_TIME", "TIME_SPAN", "is_epoch", "iso_utc",
-           "parse_instant", "utc_seconds"]
+__all__ = ["ALLOWED", "EPOCH", "ISO_TIME", "MAX_EPOCH", "PLAIN_TIME", "SPREADSHEET_DATE", "SPREADSHEET_SAID",
+           "TIME_SPAN", "is_epoch", "iso_utc", "parse_instant", "utc_seconds"]

@@ -61,3 +61,19 @@ def test_times_without_a_zone_read_by_arrow_as_pandas_reads_them():
         assert _zoneless_nanoseconds(pd.Series([bad], dtype="str")) is None
         with pytest.raises(ModelError, match="line 9 column time.*exists"):
             utc_seconds(["2023-08-31 00:00", bad], "t", [8, 9], "time")
+
+
+@pytest.mark.parametrize("cell, spreadsheet", [("6/3/2024 0:01", True), ("03.06.2024 00:01:07", True),
+                                               ("6/3/2024 12:01 PM", True), ("6/3/24", True),
+                                               ("2024/06/03 00:01", False), ("June 3 2024", False)])
+def test_a_spreadsheet_s_date_is_named_as_one(cell, spreadsheet):
+    """A GLATOS extract opened in a spreadsheet and saved again holds its locale's dates (``6/3/2024 0:01``: the
+    seconds dropped): refused as before, and said to be a spreadsheet's date, to give the file as exported; another
+    form that is no ISO time is refused without it."""
+    from sblsim.orchestrator.io.times import ALLOWED, SPREADSHEET_SAID, utc_seconds
+
+    with pytest.raises(ModelError) as refused:
+        utc_seconds(["2024-06-03 00:01:00.742", cell], "detections: 'd.csv'", [2, 3], "detection_timestamp_utc")
+    said = str(refused.value)
+    assert f"line 3 column detection_timestamp_utc: '{cell}' is not allowed" in said and ALLOWED in said, said
+    assert said.endswith(SPREADSHEET_SAID) == spreadsheet and "\n" not in said
