@@ -64,8 +64,8 @@ NEVER_HEARD = "sync tags never heard"
 
 
 class SyncTagsUnheard(ModelError):
-    """Detections holding fewer than two of the receivers table's sync tags' (an extract of a tag project holds its own
-    tags alone): a refusal of the synchronisation that a study takes as clocks not synchronised, said."""
+    """Fewer than two detections of the receivers table's sync tags (an extract of a tag project holds its own tags
+    alone): a refusal of the synchronisation that a study takes as clocks not synchronised, said."""
 
 
 @dataclass
@@ -284,7 +284,7 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     sync = frame if pick.all() and held == list(frame.columns) else frame.loc[pick, held]
     if len(sync) < 2:
         raise SyncTagsUnheard("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
-                         "detections in which receivers hear the sync tags named in the table's sync_tag column")
+                              "detections in which receivers hear the sync tags named in the table's sync_tag column")
     receiver = sync["receiver"].map(index).to_numpy(np.int64)
     tag = sync["tag"].map(tag_index).to_numpy(np.int64)
     origin = float(np.floor(sync["time"].min()))

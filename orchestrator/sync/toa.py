@@ -350,7 +350,7 @@ def build(detections: Path, receivers: Path, sync: Path, tag: str, format: str |
     shortest = _shortest(ping_type, interval, sequence)
     deployments = read_deployments(receivers, crs, frame)
     read = read_any(detections, format, tags=[tag])  # (of a store, the tag's rows alone)
-    deployments = serials_as_logged(deployments, read.frame["receiver"].unique())[0]  # as the sync took them
+    deployments = serials_as_logged(deployments, read.frame["receiver"].unique())[0]  # VR2AR-461000: 461000
     array = in_water(read, assign(read, deployments), deployments)  # as the synchronisation took them
     deployments, assigned = array.deployments, array.assigned
     data, table = assigned.detections, assigned.hydrophones
