@@ -87,6 +87,13 @@ def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, star
     connected components of the graph linking the receivers that hear one emission), each sharing
     :data:`MIN_SHARED` emissions or more with the others so tied (a receiver that shares fewer is left out, and the
     count of the others is taken again without it)."""
+    roots, able = components(receiver, emission, n_receivers)
+    return (roots == roots[start]) & able
+
+
+def components(receiver: np.ndarray, emission: np.ndarray, n_receivers: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`connected`'s graph: (n_receivers,) each receiver's component (a label) and (n_receivers,) bool whether
+    it shares :data:`MIN_SHARED` emissions or more with the others of its component."""
     order = np.lexsort((receiver, emission))
     e, r = emission[order], receiver[order]
     while True:
@@ -100,7 +107,7 @@ def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, star
         e, r = e[~few[r]], r[~few[r]]
     graph = sp.csr_matrix((np.ones(len(same)), (r[same], r[same + 1])), shape=(n_receivers, n_receivers))
     _, roots = scipy.sparse.csgraph.connected_components(graph, directed=False)
-    return (roots == roots[start]) & (shared >= MIN_SHARED)
+    return roots, shared >= MIN_SHARED
 
 
-__all__ = ["MIN_SHARED", "connected", "group_emissions", "later_duplicates", "sync_emissions"]
+__all__ = ["MIN_SHARED", "components", "connected", "group_emissions", "later_duplicates", "sync_emissions"]

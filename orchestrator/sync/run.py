@@ -32,7 +32,7 @@ from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
-from sblsim.models.sync.emissions import MIN_SHARED, connected, sync_emissions
+from sblsim.models.sync.emissions import MIN_SHARED, components, connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
@@ -64,8 +64,14 @@ NEVER_HEARD = "sync tags never heard"
 
 
 class SyncTagsUnheard(ModelError):
-    """Fewer than two detections of the receivers table's sync tags (an extract of a tag project holds its own tags
-    alone): a refusal of the synchronisation that a study takes as clocks not synchronised, said."""
+    """The sync tags not heard by two receivers (fewer than two detections of the receivers table's sync tags: an
+    extract of a tag project holds its own tags alone; or each heard by its own receiver alone): a refusal of the
+    synchronisation that a study takes as clocks not synchronised, said with its ``reason``."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(f"sync: {reason}; allowed: raw detections in which receivers hear the sync tags named in the "
+                         "table's sync_tag column, each heard by two receivers or more")
 
 
 @dataclass
@@ -283,8 +289,8 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     # a season's other columns never copied; rows that are all the sync tags' (a study's) not copied at all
     sync = frame if pick.all() and held == list(frame.columns) else frame.loc[pick, held]
     if len(sync) < 2:
-        raise SyncTagsUnheard("sync: fewer than two detections of the receivers table's sync tags; allowed: raw "
-                              "detections in which receivers hear the sync tags named in the table's sync_tag column")
+        raise SyncTagsUnheard("fewer than two detections of the receivers table's sync tags (an extract of a tag "
+                              "project holds its own tags alone)")
     receiver = sync["receiver"].map(index).to_numpy(np.int64)
     tag = sync["tag"].map(tag_index).to_numpy(np.int64)
     origin = float(np.floor(sync["time"].min()))
@@ -342,6 +348,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
                              f"{', '.join(names[:30])}")
         start = index[reference]
     linked = connected(receiver[used], emission[used], n_receivers, start)
+    if not linked[start] and not components(receiver[used], emission[used], n_receivers)[1].any():
+        raise SyncTagsUnheard(f"no two receivers share {MIN_SHARED} emissions of a sync tag (each heard by one "
+                              "receiver alone)")
     if not linked[start]:
         raise ModelError(f"reference: receiver {names[start]} shares fewer than {MIN_SHARED} sync-tag emissions with "
                          "another receiver; allowed: a receiver that can be synchronised")

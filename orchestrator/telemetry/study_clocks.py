@@ -60,8 +60,8 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                                   survey_sigma=survey_sigma, take_seen=take_seen, release_rows=release_rows)
         except RoundingError as exc:  # no clock can be synchronised: each tag says what that allows
             rounded = str(exc)
-        except SyncTagsUnheard:  # the sync tags named, none heard (a tag project's extract): as with none named
-            unheard = sorted(set(table["sync_tag"]) - {""})
+        except SyncTagsUnheard as exc:  # the sync tags named, none heard by two receivers: as with none named
+            unheard = exc.reason
         else:
             s = outcome.summary
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
@@ -77,15 +77,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
             if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
                 info["windows"] = s["windows"]
             return offsets_clocks(outcome.offsets), table, info, outcome
+    named = sorted(set(table["sync_tag"]) - {""})
     first, last = assigned.kept_span()
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
     notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
                  "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
-                 f"none of the deployments' {len(unheard)} sync tags ({', '.join(unheard[:6])}"
-                 f"{', ...' if len(unheard) > 6 else ''}) is heard twice in the detections (an extract of a tag "
-                 "project holds its own tags alone): the receivers' clocks are taken as logged (synchronised "
-                 "already); give the raw detections with the sync tags' or --sync DIR where they are not"
-                 if unheard else
+                 f"the clocks are taken as logged (synchronised already), not synchronised: {unheard} (the "
+                 f"deployments' {len(named)} sync tags: {', '.join(named[:6])}{', ...' if len(named) > 6 else ''}); "
+                 "give the raw detections with the sync tags' or --sync DIR where they are not" if unheard else
                  "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
     source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone else UNHEARD if unheard

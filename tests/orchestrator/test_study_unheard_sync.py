@@ -28,10 +28,40 @@ def test_a_study_whose_detections_hold_no_sync_tag_takes_the_clocks_as_logged(tm
                      str(tmp_path / "study")]) == 0
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     assert study["clocks"]["source"] == UNHEARD
-    said = [n for n in study["notes"] if n.startswith("none of the deployments'")]
-    assert len(said) == 1 and "taken as logged" in said[0] and str(min(named)) in said[0], study["notes"]
+    said = [n for n in study["notes"] if n.startswith("the clocks are taken as logged")]
+    assert len(said) == 1 and "fewer than two detections of the receivers table's sync tags" in said[0], said
+    assert str(min(named)) in said[0], said
     tags = pd.read_csv(tmp_path / "study" / "tags.csv", dtype=str, keep_default_na=False)
     assert tags["transmitter"].tolist() == ["7953"] and tags["reason"].str.len().gt(0).all()
     assert cli.main(["sync", str(tmp_path / "detections.csv"), "--receivers", str(DATA / "hydrophones.csv"),
                      "--out", str(tmp_path / "sync")]) == 2
     assert not (tmp_path / "sync").exists()
+
+
+def _boats_sync_tags():
+    table = pd.read_csv(DATA / "detections.csv")
+    sheet = pd.read_csv(DATA / "deployments.csv").dropna(subset=["transmitter"])
+    home = dict(zip(sheet["transmitter"].astype(int), sheet["ins_serial_no"].astype(int)))
+    return table, home
+
+
+def test_sync_tags_each_heard_at_its_own_receiver_alone(tmp_path):
+    """Every sync tag heard by its own receiver alone (no two receivers share an emission): ``sblsim sync`` refuses
+    in one line saying so (before: 'reference: receiver 1623 shares fewer than 2 sync-tag emissions', the receiver
+    it had chosen), and a study takes the clocks as logged, said with that reason."""
+    import json
+
+    from sblsim.orchestrator import cli
+
+    table, home = _boats_sync_tags()
+    alone = table[~table["tag"].isin(list(home)) | (table["serial"] == table["tag"].map(home))]
+    alone.to_csv(tmp_path / "detections.csv", index=False)
+    assert cli.main(["sync", str(tmp_path / "detections.csv"), "--receivers", str(DATA / "hydrophones.csv"),
+                     "--out", str(tmp_path / "sync")]) == 2
+    assert not (tmp_path / "sync").exists()
+    assert cli.main(["track", str(tmp_path / "detections.csv"), "--receivers", str(DATA / "deployments.csv"),
+                     "--tags", str(DATA / "tags.csv"), "--tag", "7953", "--out", str(tmp_path / "study")]) == 0
+    study = json.loads((tmp_path / "study" / "study.json").read_text())
+    said = [n for n in study["notes"] if n.startswith("the clocks are taken as logged")]
+    assert len(said) == 1 and "no two receivers share 2 emissions of a sync tag" in said[0], study["notes"]
+

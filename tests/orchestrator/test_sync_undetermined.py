@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 import sblsim
-from sblsim.models.sync.emissions import connected
+from sblsim.models.sync.emissions import components, connected
 from sblsim.models.sync.noise import undetermined
 from sblsim.models.sync.simulate import simulate_sync
 from sblsim.models.tracking.timing import CLOCK_SIGMA_RANGE
@@ -49,6 +49,10 @@ def test_a_receiver_sharing_one_emission_is_not_connected_and_the_count_is_taken
     assert connected(receiver, emission, 6, 0).tolist() == [True, True, True, False, False, False]
     twice = np.r_[receiver, 3, 0, 4, 3], np.r_[emission, 7, 7, 8, 8]
     assert connected(*twice, 6, 0).tolist() == [True, True, True, True, True, False]
+    roots, able = components(receiver, emission, 6)  # the graph itself: who shares enough, from any receiver
+    assert able.tolist() == [True, True, True, False, False, False] and len(set(roots[:3])) == 1
+    alone = components(np.array([0, 1, 2, 0]), np.array([1, 2, 3, 4]), 3)[1]  # each emission heard once
+    assert not alone.any()
 
 
 def test_a_clock_segment_undetermined_is_named_and_its_receiver_kept_where_another_segment_holds():
