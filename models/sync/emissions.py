@@ -14,6 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.csgraph
 
+from sblsim.models.declarations import ModelError
+
 
 def group_emissions(tag: np.ndarray, time: np.ndarray, gap: np.ndarray) -> np.ndarray:
     """The emission each arrival belongs to: a tag's arrivals (at every receiver) sorted by time, a new emission
@@ -82,6 +84,17 @@ def sync_emissions(tag: np.ndarray, receiver: np.ndarray, time: np.ndarray, gap:
 MIN_SHARED = 2
 
 
+class SyncTagsUnheard(ModelError):
+    """The sync tags not heard by two receivers (fewer than two detections of the receivers table's sync tags: an
+    extract of a tag project holds its own tags alone; or each heard by its own receiver alone): a refusal of the
+    synchronisation that a study takes as clocks not synchronised, said with its ``reason``."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(f"sync: {reason}; allowed: raw detections in which receivers hear the sync tags named in the "
+                         "table's sync_tag column, each heard by two receivers or more")
+
+
 def connected(receiver: np.ndarray, emission: np.ndarray, n_receivers: int, start: int) -> np.ndarray:
     """(n_receivers,) bool: the receivers tied to ``start`` through emissions heard by two receivers or more (the
     connected components of the graph linking the receivers that hear one emission), each sharing
@@ -110,4 +123,5 @@ def components(receiver: np.ndarray, emission: np.ndarray, n_receivers: int) -> 
     return roots, shared >= MIN_SHARED
 
 
-__all__ = ["MIN_SHARED", "components", "connected", "group_emissions", "later_duplicates", "sync_emissions"]
+__all__ = ["MIN_SHARED", "SyncTagsUnheard", "components", "connected", "group_emissions", "later_duplicates",
+           "sync_emissions"]

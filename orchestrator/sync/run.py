@@ -32,7 +32,7 @@ from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
-from sblsim.models.sync.emissions import MIN_SHARED, components, connected, sync_emissions
+from sblsim.models.sync.emissions import MIN_SHARED, SyncTagsUnheard, components, connected, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
@@ -61,17 +61,6 @@ BIN_HOURS_RANGE = (0.05, 168.0)
 RESET_GAP = 86400.0
 #: The note naming the receivers table's sync tags no receiver heard (a sync tag that died, or an ID mistyped).
 NEVER_HEARD = "sync tags never heard"
-
-
-class SyncTagsUnheard(ModelError):
-    """The sync tags not heard by two receivers (fewer than two detections of the receivers table's sync tags: an
-    extract of a tag project holds its own tags alone; or each heard by its own receiver alone): a refusal of the
-    synchronisation that a study takes as clocks not synchronised, said with its ``reason``."""
-
-    def __init__(self, reason: str) -> None:
-        self.reason = reason
-        super().__init__(f"sync: {reason}; allowed: raw detections in which receivers hear the sync tags named in the "
-                         "table's sync_tag column, each heard by two receivers or more")
 
 
 @dataclass
@@ -502,5 +491,4 @@ def _resets(detections: Detections, sync: pd.DataFrame) -> dict[tuple[str, int],
             if (r["receiver"], r["clock_part"]) in named}
 
 
-__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SYNC_COLUMNS", "SyncOutcome", "SyncTagsUnheard", "corrected_times",
-           "synchronise"]
+__all__ = ["BIN_HOURS_RANGE", "MIN_BIN_ARRIVALS", "SYNC_COLUMNS", "SyncOutcome", "corrected_times", "synchronise"]

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from sblsim.models.sync.emissions import SyncTagsUnheard
 from sblsim.models.sync.resolution import RoundingError
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
-from sblsim.orchestrator.sync.run import NEVER_HEARD, SyncTagsUnheard, synchronise
+from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
 
