@@ -19,7 +19,7 @@ import os
 import re
 import stat
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import BinaryIO, Callable, Sequence
 
 import numpy as np
 
@@ -224,13 +224,17 @@ def check_cells(data: bytes, name: str, what: str, delimiter: str = ",", *, max_
 
 def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
                  refuse: Callable[[str, str, str], ModelError], *, delimiter: str | None = ",",
-                 max_line_cells: int | None = None, max_cells: int | None = None, comments: bool = False) -> bytes:
+                 max_line_cells: int | None = None, max_cells: int | None = None, comments: bool = False,
+                 stream: BinaryIO | None = None) -> bytes:
     """A regular file's bytes, refused before it is read whole when it is larger than ``max_bytes`` or holds more
     than ``max_lines`` lines (counted in what was read, not only from the file's size): ``refuse(name, what,
     amount)`` the error of a file too large; and, unless ``delimiter`` is None (a file that is not a table), refused
     before anything parses it when a line is longer than :data:`MAX_LINE_BYTES` or holds more than
     ``max_line_cells`` cells, or the table more than ``max_cells`` (:func:`check_cells`, with ``delimiter`` and
     ``comments``).
+
+    With ``stream`` (the file's text as an archive holds it, decompressed as it is read), its bytes read to the same
+    bounds instead of the file's.
 
     Raises
     ------
@@ -242,11 +246,14 @@ def read_bounded(path: Path, what: str, max_bytes: int, max_lines: int,
     size = regular_file(path, what)
     if size > max_bytes:
         raise refuse(name, what, f"is {size / 2**20:.0f} MiB")
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(max_bytes + 1)
-    except OSError as exc:
-        raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if stream is not None:
+        data = stream.read(max_bytes + 1)
+    else:
+        try:
+            with open(path, "rb") as handle:
+                data = handle.read(max_bytes + 1)
+        except OSError as exc:
+            raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
     if len(data) > max_bytes:
         raise refuse(name, what, f"is more than {max_bytes // 2**20} MiB")
     lines = data.count(b"\n")

@@ -12,9 +12,13 @@ refuses in one line naming the format and the export that makes the CSV sblsim r
   E1``) and an ``.xlsx`` (a zip archive of XML parts, first bytes ``PK 03 04``, its first part one of the Office Open
   XML package's: ECMA-376 Part 2, the Open Packaging Conventions).
 * **Archives**: an OpenDocument spreadsheet (a zip archive whose first file is ``mimetype``), any other zip archive
-  (as OTN and GLATOS hand out their extracts: a CSV zipped), named with its first file (read from its first local
-  header, PKWARE's APPNOTE § 4.3.7), and a gzip file (first bytes ``1F 8B``, RFC 1952): refused as text, saying to
-  extract the CSV first. Nothing is extracted.
+  (as a network hands out its detection extracts: a CSV zipped), named with its first file (read from its
+  first local header, PKWARE's APPNOTE § 4.3.7), and a gzip file (first bytes ``1F 8B``, RFC 1952): refused as text
+  by every reader but the detections', saying to extract the CSV first. The detections' reader reads the one CSV
+  such an archive holds (:func:`archive_stream`) as hostile input: nothing written to disk, a name inside never
+  opened as a path, the archive's directory bounded before it is parsed (its end record, APPNOTE § 4.3.16: at most
+  :data:`MAX_ARCHIVE_FILES` files and :data:`MAX_DIRECTORY_BYTES` of directory), its CSV decompressed only as far as
+  the reader's bound on its text, an encrypted or ZIP64 archive refused.
 
 Sources: the example logs glatos ships (``inst/extdata/detection_files_raw``: five VRL files of four receiver
 models and one HR2 VDAT file) and glatos's ``vdat_convert`` and ``vue_convert`` (the conversions).
@@ -22,7 +26,11 @@ models and one HR2 VDAT file) and glatos's ``vdat_convert`` and ``vue_convert`` 
 
 from __future__ import annotations
 
+import gzip
+import zipfile
+from contextlib import contextmanager
 from pathlib import Path
+from typing import BinaryIO, Iterator
 
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io.tables import regular_file
@@ -44,6 +52,16 @@ GZIP_MAGIC = b"\x1f\x8b"
 OOXML_PARTS = ("[Content_Types].xml", "_rels/", "docProps/", "xl/", "customXml/")
 #: The bytes read to tell a file's kind.
 HEAD_BYTES = 8
+#: The most files a zip archive of detections may hold (a CSV, its readme and metadata: a few).
+MAX_ARCHIVE_FILES = 64
+#: The most bytes a zip archive's central directory may take (a few files' names: a few KiB).
+MAX_DIRECTORY_BYTES = 2**20
+#: A zip archive's end of central directory record: its signature and the bytes from its end it can start at (its
+#: 22 bytes and a comment of at most 65,535).
+END_RECORD = b"PK\x05\x06"
+END_SEARCH = 22 + 65535
+#: The files a zip archive may hold besides the CSV read, not counted as tables: macOS's resource forks.
+RESOURCE_FORKS = "__MACOSX/"
 
 
 def kind_of(head: bytes, suffix: str = "") -> str | None:
@@ -128,8 +146,101 @@ def zip_first_name(head: bytes) -> str | None:
     length = int.from_bytes(head[26:28], "little")
     if length == 0 or len(head) < 30 + length:
         return None
-    text = head[30:30 + length].decode("utf-8", errors="replace")[:80]
-    return "".join(c if c.isprintable() else "?" for c in text)
+    return _shown(head[30:30 + length].decode("utf-8", errors="replace"))
+
+
+def archive_kind(path: Path) -> str | None:
+    """``"zip"`` (a zip archive that is no workbook: its first file is none of an Office Open XML package's parts,
+    nor an OpenDocument's ``mimetype``), ``"gzip"``, or None (any other file), told by its first bytes."""
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(4096)
+    except OSError:
+        return None
+    if head.startswith(GZIP_MAGIC):
+        return "gzip"
+    first = zip_first_name(head)
+    if first is not None and first != "mimetype" and not first.startswith(OOXML_PARTS):
+        return "zip"
+    return None
+
+
+def _checked_directory(path: Path, name: str, what: str) -> None:
+    """Refuse a zip archive whose central directory is larger than a detections archive's before Python's zipfile
+    parses it (it makes an object of every entry): its end record's count of files and directory size (APPNOTE
+    § 4.3.16), ZIP64's marks (0xFFFF, 0xFFFFFFFF) refused."""
+    with open(path, "rb") as handle:
+        handle.seek(0, 2)
+        size = handle.tell()
+        handle.seek(max(0, size - END_SEARCH))
+        tail = handle.read()
+    at = tail.rfind(END_RECORD)
+    if at < 0 or len(tail) < at + 22:
+        raise ModelError(f"{what}: {name!r} is not a readable zip archive (no end of its directory); allowed: a zip "
+                         "archive holding one CSV, or the CSV")
+    files = int.from_bytes(tail[at + 10:at + 12], "little")
+    directory = int.from_bytes(tail[at + 12:at + 16], "little")
+    if files == 0xFFFF or directory == 0xFFFFFFFF:
+        raise ModelError(f"{what}: {name!r} is a ZIP64 archive; allowed: a zip archive holding one CSV (at most "
+                         f"{MAX_ARCHIVE_FILES} files), or the CSV")
+    if files > MAX_ARCHIVE_FILES or directory > MAX_DIRECTORY_BYTES:
+        raise ModelError(f"{what}: {name!r} holds {files:,} files ({directory:,} bytes of directory); allowed at most "
+                         f"{MAX_ARCHIVE_FILES} files in a zip archive of detections (one CSV, its readme)")
+
+
+def _shown(text: str) -> str:
+    """A name from a file shown safely: 80 characters at most, each not printable as ``?``."""
+    return "".join(c if c.isprintable() else "?" for c in text[:80])
+
+
+@contextmanager
+def archive_stream(path: Path, what: str) -> Iterator[tuple[BinaryIO, str]]:
+    """The CSV a zip or gzip archive holds (:func:`archive_kind`), as a binary stream that decompresses as it is read
+    (the caller reads at most its bound), and the name it is shown by (``'a.zip' file 'x.csv'``); nothing written.
+
+    Raises
+    ------
+    ModelError
+        One line: a zip archive holding no CSV or more than one (``__MACOSX/`` resource forks not counted), an
+        encrypted one, one with more than :data:`MAX_ARCHIVE_FILES` files or a ZIP64 one, one that is damaged or
+        compressed in a way Python's zipfile does not read; a gzip file that is not one. An error while the stream is
+        read (a damaged deflate stream, a checksum) is the caller's (:func:`archive_error`).
+    """
+    name = str(path)
+    if archive_kind(path) == "gzip":
+        with gzip.open(path, "rb") as stream:
+            yield stream, f"{name!r}"
+        return
+    _checked_directory(path, name, what)
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise archive_error(name, what, exc) from None
+    with archive:
+        files = [m for m in archive.infolist() if not m.is_dir() and not m.filename.startswith(RESOURCE_FORKS)]
+        tables = [m for m in files if m.filename.lower().endswith(".csv")]
+        if len(tables) != 1:
+            shown = ", ".join(repr(_shown(m.filename)) for m in (tables or files)[:5])
+            held = f"{len(tables)} CSV files ({shown})" if tables else f"no CSV file (its files: {shown or 'none'})"
+            raise ModelError(f"{what}: {name!r} is a zip archive holding {held}; allowed: a zip archive holding one "
+                             "CSV, or the CSVs extracted and given as files or a folder")
+        member = tables[0]
+        if member.flag_bits & 0x1:
+            raise ModelError(f"{what}: {name!r} holds {_shown(member.filename)!r} encrypted; allowed: a zip archive "
+                             "that is not encrypted, or the CSV")
+        try:
+            stream = archive.open(member)
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError, NotImplementedError, RuntimeError) as exc:
+            raise archive_error(name, what, exc) from None
+        with stream:
+            yield stream, f"{name!r} file {_shown(member.filename)!r}"
+
+
+def archive_error(name: str, what: str, exc: Exception) -> ModelError:
+    """The one line refusing an archive that cannot be read (a library's error named, at most 120 characters)."""
+    reason = " ".join(str(exc).split())[:120] or type(exc).__name__
+    return ModelError(f"{what}: {name!r} is an archive that cannot be read ({reason}); allowed: a zip or gzip "
+                      "archive holding one CSV, or the CSV")
 
 
 def utf16(head: bytes) -> bool:
@@ -146,5 +257,7 @@ def utf16(head: bytes) -> bool:
     return False
 
 
-__all__ = ["GZIP_MAGIC", "HEAD_BYTES", "LOGS", "OOXML_PARTS", "XLSX_MAGIC", "XLS_MAGIC", "first_bytes", "kind_of",
-           "log_refused", "not_text", "refuse_log", "utf16", "zip_first_name"]
+__all__ = ["END_RECORD", "END_SEARCH", "GZIP_MAGIC", "HEAD_BYTES", "LOGS", "MAX_ARCHIVE_FILES", "MAX_DIRECTORY_BYTES",
+           "OOXML_PARTS", "RESOURCE_FORKS", "XLSX_MAGIC", "XLS_MAGIC", "archive_error", "archive_kind",
+           "archive_stream", "first_bytes", "kind_of", "log_refused", "not_text", "refuse_log", "utf16",
+           "zip_first_name"]

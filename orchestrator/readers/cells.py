@@ -18,6 +18,8 @@ from __future__ import annotations
 import csv
 import io
 import re
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +28,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.orchestrator.io import tables
 from sblsim.orchestrator.io.tables import MAX_LINE_BYTES, NUMBER, check_cells, read_bounded
-from sblsim.orchestrator.readers.binary import not_text, refuse_log
+from sblsim.orchestrator.readers.binary import archive_error, archive_kind, archive_stream, not_text, refuse_log
 from sblsim.orchestrator.readers.limits import MAX_DETECTION_BYTES
 
 #: The separators a spreadsheet saves a table with other than the comma, as a refusal names them.
@@ -42,7 +44,7 @@ def too_large(name: str, what: str, amount: str, max_bytes: int, rows: int, hint
 
 def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int | None = None, *,
               max_cells: int | None = None, max_line_cells: int | None = None, fallback: str | None = None,
-              hint: str = "") -> str:
+              hint: str = "", archives: bool = False) -> str:
     """A regular file's text, refused before it is read whole when it is larger than ``max_bytes`` or holds more
     than ``max_rows`` lines and 1,000 besides, and before it is decoded when a line is longer than
     :data:`~sblsim.orchestrator.io.tables.MAX_LINE_BYTES` or holds more than ``max_line_cells`` cells (its commas and
@@ -65,6 +67,9 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
         none: such a text refused.
     hint : str
         Said after the refusal of a file too large (what to do with a larger one).
+    archives : bool
+        Read the one CSV a zip or gzip archive holds (:func:`~.binary.archive_stream`: decompressed to the same
+        bounds, nothing written), where the file is one; else an archive is refused as not text.
 
     Raises
     ------
@@ -73,25 +78,40 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
     """
     name = str(path)
     refuse_log(Path(path), what)  # a receiver's binary log: named, with the export that makes its CSV
-    if prefix is not None:
+
+    def whole(stream=None) -> bytes:  # the text to its bounds (of the file, or of the stream an archive holds)
+        return read_bounded(path, what, max_bytes, max_rows + 1000,
+                            lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows, hint),
+                            max_line_cells=max_line_cells, max_cells=max_cells, stream=stream)
+
+    if archives and archive_kind(Path(path)) is not None:  # a zipped (gzipped) CSV, read as it decompresses
+        data = _archived(Path(path), what, prefix, whole)
+    elif prefix is not None:
         try:
             with open(path, "rb") as handle:
-                head = handle.read(prefix)
+                data = handle.read(prefix)
         except OSError as exc:
             raise ModelError(f"{what}: {name!r} cannot be read ({exc.strerror or type(exc).__name__})") from None
-        nul = head.find(b"\0")
-        if nul >= 0:
-            raise not_text(name, what, head, nul)
-        check_cells(head, name, what, max_line_cells=max_line_cells, max_cells=max_cells)
-        return head.decode("utf-8-sig", errors="ignore") if len(head) == prefix else \
-            _decoded(head, name, what, fallback)
-    data = read_bounded(path, what, max_bytes, max_rows + 1000,
-                        lambda name, what, amount: too_large(name, what, amount, max_bytes, max_rows, hint),
-                        max_line_cells=max_line_cells, max_cells=max_cells)
+    else:
+        data = whole()
     nul = data.find(b"\0")
     if nul >= 0:
         raise not_text(name, what, data, nul)
+    if prefix is not None:
+        check_cells(data, name, what, max_line_cells=max_line_cells, max_cells=max_cells)
+        if len(data) == prefix:
+            return data.decode("utf-8-sig", errors="ignore")
     return _decoded(data, name, what, fallback)
+
+
+def _archived(path: Path, what: str, prefix: int | None, whole) -> bytes:
+    """:func:`read_text`'s bytes of the CSV an archive holds: its first ``prefix`` bytes, or ``whole(stream)`` (its
+    text to the file's bounds)."""
+    with archive_stream(path, what) as (stream, _):
+        try:
+            return stream.read(prefix) if prefix is not None else whole(stream)
+        except (OSError, EOFError, zlib.error, zipfile.BadZipFile) as exc:  # a damaged stream, a checksum
+            raise archive_error(str(path), what, exc) from None
 
 
 #: The characters of a text's end :func:`cut_short` reads: two of its longest lines.

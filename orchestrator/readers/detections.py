@@ -208,7 +208,7 @@ def read_detections(path: Path | str, format: str | None = "yaps") -> Detections
     name = str(path)
     # a Windows export in Latin-1 (VUE writes a temperature tag's unit as °C in it) read, not refused
     text = read_text(path, what, MAX_DETECTION_BYTES, MAX_DETECTIONS, max_cells=MAX_DETECTION_CELLS,
-                     fallback="latin-1", hint=LARGER)
+                     fallback="latin-1", hint=LARGER, archives=True)  # a zipped extract, as a network hands it out
     if format is None:
         format = _format_of(text[:65536].split("\n", 1)[0].rstrip("\r"), name)
     cut_short(text, name, what, by_record=format == "fathom")

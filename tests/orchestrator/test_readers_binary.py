@@ -69,11 +69,13 @@ def _zipped(path, members):
     return path
 
 
-@pytest.mark.parametrize("reader", ["detections", "sniffed detections", "receivers", "sound speed"])
+@pytest.mark.parametrize("reader", ["sniffed detections", "receivers", "sound speed"])
 def test_an_archive_is_named_as_one_and_nothing_extracted(tmp_path, reader):
-    """A zipped CSV (as OTN and GLATOS hand out their extracts) and a gzipped one, given where CSV text is read: each
-    named as what it is, with the file the zip holds first, where before a zip was called an Excel workbook and a gzip
-    file said to hold a NUL byte; a real workbook is still named a workbook, and an OpenDocument spreadsheet one."""
+    """A zipped CSV and a gzipped one, given where CSV text is read and an archive is not (every reader but the
+    detections', which reads the CSV inside: ``test_readers_archives.py``; the store's sniffing of a file's format):
+    each named as what it is, with the file the zip holds first, where before a zip was called an Excel workbook and
+    a gzip file said to hold a NUL byte; a real workbook is still named a workbook, and an OpenDocument spreadsheet
+    one."""
     import gzip
 
     import openpyxl
@@ -98,6 +100,6 @@ def test_an_archive_s_hostile_first_name_is_shown_safely(tmp_path):
     """A zip whose first file's name holds control characters, a line end and 300 characters: said in one line, 80
     characters of the name at most, each not printable as '?'."""
     name = "a\nb\x1b[31mred\x07" + "x" * 300
-    message = _message("detections", _zipped(tmp_path / "odd.zip", [(name, "t")]))
+    message = _message("receivers", _zipped(tmp_path / "odd.zip", [(name, "t")]))
     shown = message.split("its first file ", 1)[1].split("), not CSV text", 1)[0]
     assert shown == repr(("a?b?[31mred?" + "x" * 300)[:80]), shown
