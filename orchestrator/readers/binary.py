@@ -169,11 +169,14 @@ def _checked_directory(path: Path, name: str, what: str) -> None:
     """Refuse a zip archive whose central directory is larger than a detections archive's before Python's zipfile
     parses it (it makes an object of every entry): its end record's count of files and directory size (APPNOTE
     § 4.3.16), ZIP64's marks (0xFFFF, 0xFFFFFFFF) refused."""
-    with open(path, "rb") as handle:
-        handle.seek(0, 2)
-        size = handle.tell()
-        handle.seek(max(0, size - END_SEARCH))
-        tail = handle.read()
+    try:
+        with open(path, "rb") as handle:
+            handle.seek(0, 2)
+            size = handle.tell()
+            handle.seek(max(0, size - END_SEARCH))
+            tail = handle.read()
+    except OSError as exc:
+        raise archive_error(name, what, exc) from None
     at = tail.rfind(END_RECORD)
     if at < 0 or len(tail) < at + 22:
         raise ModelError(f"{what}: {name!r} is not a readable zip archive (no end of its directory); allowed: a zip "
@@ -194,9 +197,9 @@ def _shown(text: str) -> str:
 
 
 @contextmanager
-def archive_stream(path: Path, what: str) -> Iterator[tuple[BinaryIO, str]]:
+def archive_stream(path: Path, what: str) -> Iterator[BinaryIO]:
     """The CSV a zip or gzip archive holds (:func:`archive_kind`), as a binary stream that decompresses as it is read
-    (the caller reads at most its bound), and the name it is shown by (``'a.zip' file 'x.csv'``); nothing written.
+    (the caller reads at most its bound); nothing written.
 
     Raises
     ------
@@ -209,7 +212,7 @@ def archive_stream(path: Path, what: str) -> Iterator[tuple[BinaryIO, str]]:
     name = str(path)
     if archive_kind(path) == "gzip":
         with gzip.open(path, "rb") as stream:
-            yield stream, f"{name!r}"
+            yield stream
         return
     _checked_directory(path, name, what)
     try:
@@ -233,7 +236,7 @@ def archive_stream(path: Path, what: str) -> Iterator[tuple[BinaryIO, str]]:
         except (zipfile.BadZipFile, OSError, ValueError, EOFError, NotImplementedError, RuntimeError) as exc:
             raise archive_error(name, what, exc) from None
         with stream:
-            yield stream, f"{name!r} file {_shown(member.filename)!r}"
+            yield stream
 
 
 def archive_error(name: str, what: str, exc: Exception) -> ModelError:

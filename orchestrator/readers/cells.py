@@ -107,7 +107,7 @@ def read_text(path: Path, what: str, max_bytes: int, max_rows: int, prefix: int 
 def _archived(path: Path, what: str, prefix: int | None, whole) -> bytes:
     """:func:`read_text`'s bytes of the CSV an archive holds: its first ``prefix`` bytes, or ``whole(stream)`` (its
     text to the file's bounds)."""
-    with archive_stream(path, what) as (stream, _):
+    with archive_stream(path, what) as stream:
         try:
             return stream.read(prefix) if prefix is not None else whole(stream)
         except (OSError, EOFError, zlib.error, zipfile.BadZipFile) as exc:  # a damaged stream, a checksum
