@@ -3,9 +3,9 @@
 
 A detection's tag is its full ID where its file gives the code space (:func:`full_ids`), else its id alone (the YAPS
 tables). A tag named by a user (``--tag``, a tag sheet's ``transmitter``, a deployment's sync tag) is found among
-the detected tags by :func:`match`: the same text, else the same id where one of the two names has no code space
-(``4555`` finds ``A69-1602-4555`` and the other way round), never the same id in another code space; a bare id that
-two code spaces share is refused, both named.
+the detected tags by :func:`match`: the same text (its letters' case aside), else the same id where one of the two
+names has no code space (``4555`` finds ``A69-1602-4555`` and the other way round), never the same id in another
+code space; a bare id that two code spaces share is refused, both named.
 """
 
 from __future__ import annotations
@@ -63,6 +63,9 @@ def match(given: str, tags: Iterable[str]) -> str | None:
     tags = set(tags)
     if given in tags:
         return given
+    alike = [t for t in tags if t.casefold() == given.casefold()]  # a69-1602-4555: a code space's letters typed small
+    if len(alike) == 1:
+        return alike[0]
     space, ident = split(given)
     found = sorted(t for t in tags if split(t)[1] == ident and (not space or not split(t)[0]))
     if len(found) > 1:

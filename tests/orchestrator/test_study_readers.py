@@ -257,5 +257,7 @@ def test_a_transmitter_is_found_by_its_full_id_or_its_id():
     assert match("4555", tags) == "A69-1602-4555"  # one code space has it
     assert match("A69-1601-802510", tags) == "802510"  # the detections have no code space
     assert match("A69-1601-4555", tags) is None  # another code space is another tag
+    assert match("a69-1602-4555", tags) == "A69-1602-4555"  # a code space typed in small letters
+    assert match("a69-1601-4555", tags) is None
     with pytest.raises(ModelError, match="different code spaces .*A69-1601-7953, A69-1602-7953"):
         match("7953", tags)
