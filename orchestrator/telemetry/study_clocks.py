@@ -1,7 +1,7 @@
 """A telemetry study's clocks (:func:`study_clocks`): a synchronisation's folder given (its ``offsets.csv``, its
 refined positions and their errors where it has them); else synchronised here from the deployments' sync tags
-(:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag, the detections hold
-none of them or the times are too coarse, taken as logged (said).
+(:func:`~sblsim.orchestrator.sync.run.synchronise`); else, where no deployment has a sync tag, no two receivers hear
+one or the times are too coarse, taken as logged (said).
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
-#: The clocks' source where the deployments name sync tags the detections do not hold.
+#: The clocks' source where the deployments' sync tags are not heard by two receivers (the detections hold none of them,
+#: or each is heard by its own receiver alone).
 UNHEARD = "as logged (no sync tag heard)"
 
 
