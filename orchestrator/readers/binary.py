@@ -117,15 +117,14 @@ def refuse_log(path: Path, what: str) -> None:
 def not_text(name: str, what: str, data: bytes, nul: int) -> ModelError:
     """The one line refusing a file that holds a NUL byte at ``nul``: a workbook named as one (to be saved as CSV),
     else a binary file."""
-    kind = kind_of(data[:HEAD_BYTES])
-    first = zip_first_name(data) if kind == "xlsx" else None
-    if first == "mimetype":  # an OpenDocument package's first file (ODF 1.2 Part 3 § 3.3): a spreadsheet's
+    kind, archive = kind_of(data[:HEAD_BYTES]), _archive_of(data)
+    if archive == "ods":
         return ModelError(f"{what}: {name!r} is an OpenDocument spreadsheet (.ods), not CSV text; allowed: CSV text "
                           "(its sheet saved as CSV)")
-    if first is not None and not first.startswith(OOXML_PARTS):
-        return ModelError(f"{what}: {name!r} is a zip archive (its first file {first!r}), not CSV text; allowed: CSV "
-                          "text (the archive's CSV extracted first)")
-    if data.startswith(GZIP_MAGIC):
+    if archive == "zip":
+        return ModelError(f"{what}: {name!r} is a zip archive (its first file {zip_first_name(data)!r}), not CSV "
+                          "text; allowed: CSV text (the archive's CSV extracted first)")
+    if archive == "gzip":
         return ModelError(f"{what}: {name!r} is gzip-compressed, not CSV text; allowed: CSV text (the file "
                           "decompressed first: gunzip)")
     if kind in ("xls", "xlsx"):
@@ -149,20 +148,28 @@ def zip_first_name(head: bytes) -> str | None:
     return _shown(head[30:30 + length].decode("utf-8", errors="replace"))
 
 
+def _archive_of(head: bytes) -> str | None:
+    """The archive a file's first bytes show: ``"gzip"``, ``"ods"`` (an OpenDocument package: its first file
+    ``mimetype``, ODF 1.2 Part 3 § 3.3), ``"zip"`` (any other zip archive whose first file is none of an Office Open
+    XML package's parts), or None (a workbook, or no archive)."""
+    if head.startswith(GZIP_MAGIC):
+        return "gzip"
+    first = zip_first_name(head)
+    if first is None or first.startswith(OOXML_PARTS):
+        return None
+    return "ods" if first == "mimetype" else "zip"
+
+
 def archive_kind(path: Path) -> str | None:
-    """``"zip"`` (a zip archive that is no workbook: its first file is none of an Office Open XML package's parts,
-    nor an OpenDocument's ``mimetype``), ``"gzip"``, or None (any other file), told by its first bytes."""
+    """``"zip"`` (a zip archive that is no workbook nor spreadsheet), ``"gzip"``, or None (any other file), told by
+    its first bytes (:func:`_archive_of`)."""
     try:
         with open(path, "rb") as handle:
             head = handle.read(4096)
     except OSError:
         return None
-    if head.startswith(GZIP_MAGIC):
-        return "gzip"
-    first = zip_first_name(head)
-    if first is not None and first != "mimetype" and not first.startswith(OOXML_PARTS):
-        return "zip"
-    return None
+    kind = _archive_of(head)
+    return kind if kind in ("zip", "gzip") else None
 
 
 def _checked_directory(path: Path, name: str, what: str) -> None:

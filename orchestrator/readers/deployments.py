@@ -286,8 +286,7 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
     body, lines = _with_serial(body, lines, header[index["serial"]], index["serial"], name, what, notes)
     serial = pattern(body[index["serial"]], IDENTIFIER, what, name, lines, header[index["serial"]],
                      "a receiver's serial of 1 to 40 letters, digits, '.', '_' or '-'")
-    serial, decimals = whole_ids(serial)
-    wholes = {header[index["serial"]]: decimals}  # each id column's whole numbers written as decimals
+    serial, decimals = whole_ids(serial)  # 802357.0 as 802357 (a number column with blanks, saved)
 
     def text(key: str, regex=None, allowed: str = "") -> np.ndarray:
         if index[key] is None:
@@ -297,9 +296,6 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
             given = (cells != "").to_numpy()
             pattern(cells[given], regex, what, name, [lines[k] for k in np.flatnonzero(given)], header[index[key]],
                     allowed)
-        if key == "sync_tag":
-            cells, count = whole_ids(cells)
-            wholes[header[index[key]]] = count
         return cells.str.slice(0, 80).to_numpy(dtype=object)
 
     def values(key: str, low: float, high: float, unit: str, missing: bool = True) -> np.ndarray:
@@ -367,10 +363,12 @@ def read_deployments(path: Path | str, crs: str | None = None, frame: str | None
                                                   f"{what}: {name!r}", lines,
                                                   None if index["bottom"] is None else header[index["bottom"]]),
                           "line": np.asarray(lines, np.int64)})
-    for key, count in wholes.items():
+    sync_tags, tag_decimals = whole_ids(table["sync_tag"])
+    table["sync_tag"] = sync_tags.to_numpy(dtype=object)
+    for key, count in ((index["serial"], decimals), (index["sync_tag"], tag_decimals)):
         if count:
-            notes.append(f"{count:,} cells of {key} read as whole numbers (802357.0 as 802357: a number column with "
-                         "blank cells, as a spreadsheet or pandas writes it)")
+            notes.append(f"{count:,} cells of {header[key]} read as whole numbers (802357.0 as 802357: a number column "
+                         "with blank cells, as a spreadsheet or pandas writes it)")
     _check_overlaps(table, "serial", "receiver", name, what)
     _check_overlaps(table[table["sync_tag"] != ""], "sync_tag", "sync tag", name, what)
     order = table.sort_values(["serial", "start"], kind="stable")

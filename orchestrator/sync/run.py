@@ -32,7 +32,7 @@ from sblsim.models.sync.breaks import fit_with_breaks
 from sblsim.models.sync.clock_fit import ClockFit
 from sblsim.models.sync.clock_parts import part_shifts
 from sblsim.models.sync.clocks import Geometry
-from sblsim.models.sync.emissions import MIN_SHARED, SyncTagsUnheard, components, connected, sync_emissions
+from sblsim.models.sync.emissions import MIN_SHARED, SyncTagsUnheard, components, sync_emissions
 from sblsim.models.sync.end_breaks import cut_ends
 from sblsim.models.sync.identifiability import SURVEY_SIGMA
 from sblsim.models.sync.noise import receiver_noise
@@ -336,8 +336,9 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
             raise ModelError(f"reference: receiver {reference!r} is not in the receivers table; allowed: one of "
                              f"{', '.join(names[:30])}")
         start = index[reference]
-    linked = connected(receiver[used], emission[used], n_receivers, start)
-    if not linked[start] and not components(receiver[used], emission[used], n_receivers)[1].any():
+    roots, able = components(receiver[used], emission[used], n_receivers)  # connected()'s graph, made once
+    linked = (roots == roots[start]) & able
+    if not able.any():
         raise SyncTagsUnheard(f"no two receivers share {MIN_SHARED} emissions of a sync tag (each heard by one "
                               "receiver alone)")
     if not linked[start]:
