@@ -57,7 +57,8 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
              sigma_toa: float | np.ndarray, survey_sigma: float, folds: int = FOLDS, dof: float = ROBUST_DOF,
              biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
              speed_sigma: float | None = None, times: np.ndarray | None = None,
-             edges: np.ndarray | None = None, rescale: bool = False) -> HeldOut:
+             edges: np.ndarray | None = None, rescale: bool = False,
+             bias_sigma: float | np.ndarray | None = None) -> HeldOut:
     """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
     the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
     anchored pings in every refinement, the refined array's times less its biases at the pings' ``times``); the
@@ -81,13 +82,16 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
         keep = np.ones(len(toa), bool)
         keep[block] = False
         refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
-                                   anchored, speed_sigma, None if times is None else times[keep], edges, rescale)
+                                   anchored, speed_sigma, None if times is None else times[keep], edges, rescale,
+                                   bias_sigma)
         moved = receivers.copy()
         moved[:, :2] += refined.shift
         # the refined array's times less its receivers' range biases (where determined, as its shifts), at its speed
         speed = c[block] * refined.speed_scale
         bias = refined.bias_at(None if times is None else times[block], len(block))
-        corrected = toa[block] - np.where(refined.determined[None], bias, 0.0) / speed[:, None]
+        # (with their own prior, each heard receiver's: clocks fitted, the positions the survey's)
+        fitted = refined.determined if bias_sigma is None else refined.arrivals > 0
+        corrected = toa[block] - np.where(fitted[None], bias, 0.0) / speed[:, None]
         medians = []
         for k, (array, arrivals, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
             ratio = best_fixes(arrivals, array, places[block], at, sigma)[2]

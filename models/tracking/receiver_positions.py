@@ -67,8 +67,8 @@ START_GATE = 25.0
 MIN_RESCALE, MIN_SIGMA = 20, 1e-6
 #: The σ [m] a place's depth is kept at in a 3-D fix (the depth is the tag's, not refitted).
 DEPTH_SIGMA = 0.01
-#: The most one Gauss-Newton step moves a receiver [survey σ]: a step the arrivals' weights are not yet right for
-#: (the first, the pings' places still the survey's) cannot throw the fit far.
+#: The most one Gauss-Newton step moves a receiver's shift or bias [its prior σ]: a step the arrivals' weights are
+#: not yet right for (the first, the pings' places still the survey's) cannot throw the fit far.
 MAX_STEP = 1.0
 
 
@@ -163,13 +163,14 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
                      sigma_toa: float | np.ndarray, survey_sigma: float, dof: float = ROBUST_DOF,
                      biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
                      speed_sigma: float | None = None, times: np.ndarray | None = None,
-                     edges: np.ndarray | None = None, rescale: bool = False) -> Refinement:
+                     edges: np.ndarray | None = None, rescale: bool = False,
+                     bias_sigma: float | np.ndarray | None = None) -> Refinement:
     """The receivers' horizontal shifts and the tag's places fitted together (the module docstring).
 
     Each ping starts from its fix at the surveyed positions (:func:`~sblsim.models.tracking.fix.fix_pings`, from
     its place in ``places`` or the fix's own start, whichever fits better); a ping whose fix fits
     :data:`START_GATE` times worse than the record's median (a fix in a mirror place, a ping of echoes) is left out;
-    each step of the shifts and biases is at most :data:`MAX_STEP` survey σ.
+    each step of the shifts and biases is at most :data:`MAX_STEP` of its prior σ (the survey's where narrower).
 
     Parameters
     ----------
@@ -214,6 +215,10 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         value over a normal's, a receiver with :data:`MIN_RESCALE` arrivals or more) and fit again:
         a timing noise taken from a synchronisation made on wrong positions took up their error (each receiver's
         as its clock's), and would weigh the receivers the refinement is to move as if they were noisy.
+    bias_sigma : float or numpy.ndarray, optional
+        [m] with ``biases``, the range biases' prior σ, one or (R,) per receiver (each of its knots'): clocks taken
+        as logged, their offsets fitted from the pings (:mod:`~sblsim.orchestrator.telemetry.study_offsets`: a
+        broad prior, one receiver's tiny, its clock the time base). None: ``survey_sigma``, as the shifts'.
 
     Returns
     -------
@@ -247,8 +252,8 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
              "t": emitted.copy(), "z": places[rows, 2] if dim == 3 else None, "c": c[rows]}
     pings["k"], pings["f"] = layout.bins(None if times is None else times[rows], len(rows))
     theta = np.zeros(layout.size)  # the biases' knots [m], the shifts [m], the slowness's scale less 1 [1]
-    prior = np.r_[np.full(layout.size - int(layout.free), survey_sigma**-2.0),
-                  [speed_sigma**-2.0] if layout.free else []]
+    spread = _prior_sigmas(layout, survey_sigma, bias_sigma)  # the biases' and the shifts' prior σ [m]
+    prior = np.r_[spread**-2.0, [speed_sigma**-2.0] if layout.free else []]
     moving = slice(0, layout.size - int(layout.free))  # the biases and the shifts: a step's size
     converged, iterations, limit = False, 0, ITERATIONS
     for stage in range(2 if rescale else 1):
@@ -263,7 +268,9 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
             if anchor is not None:
                 anchor.terms(normal, layout, receivers, theta, sigma, dof)
             step = solve(normal.matrix(prior), normal.rhs - prior * theta, layout)[0]
-            step *= min(1.0, MAX_STEP * survey_sigma / max(float(np.abs(step[moving]).max()), 1e-300))
+            # (a prior narrower than the survey's, a time base's, holds its unknown still without slowing the rest)
+            step *= min(1.0, MAX_STEP / max(float(np.abs(step[moving] / np.maximum(spread, survey_sigma)).max()),
+                                            1e-300))
             # the pings' steps given the receivers' (back-substitution: Δθ_j = A_j⁻¹ (b_j − B_j Δφ))
             px, pt = ping_steps(step)
             pings["xy"] += px
@@ -295,6 +302,26 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
                       0 if anchor is None else int(len(anchor.t)), 1.0 / m,
                       float(np.sqrt(max(border[-1, -1], 0.0))) / m**2 if layout.free else 0.0,
                       layout.edges if layout.knots > 1 else None, sigma)
+
+
+def _prior_sigmas(layout: Unknowns, survey_sigma: float, bias_sigma) -> np.ndarray:
+    """(band + 2R,) [m] the prior σ of the range biases' knots (``bias_sigma``: one, or (R,) per receiver; None:
+    ``survey_sigma``) and of the shifts (``survey_sigma``).
+
+    Raises
+    ------
+    ModelError
+        ``bias_sigma`` not positive and finite, or of another length (one line).
+    """
+    shifts = np.full(2 * layout.receivers, survey_sigma)
+    if bias_sigma is None:
+        return np.r_[np.full(layout.band, survey_sigma), shifts]
+    each = np.broadcast_to(np.asarray(bias_sigma, float), (layout.receivers,)) if np.ndim(bias_sigma) == 0 or \
+        np.shape(bias_sigma) == (layout.receivers,) else None
+    if each is None or not (np.isfinite(each).all() and (each > 0).all()):
+        raise ModelError(f"receiver positions: the range biases' prior sigma {np.shape(bias_sigma)}; allowed: "
+                         f"positive numbers [m], one or {layout.receivers}")
+    return np.r_[np.tile(each, layout.knots), shifts]
 
 
 def _rescaled(sigma: np.ndarray, residuals: np.ndarray) -> np.ndarray:

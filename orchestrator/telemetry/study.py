@@ -67,6 +67,8 @@ from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, taken_survey
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
+from sblsim.orchestrator.telemetry.study_offsets import fits, fitted_study
+from sblsim.orchestrator.telemetry.study_offsets import note as clocks_note
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
@@ -308,15 +310,17 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     if rounded:
         notes.append(rounded)
 
-    def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None, errors=None) -> StudyOutcome:
+    def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None, errors=None,
+                fitted=None) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``; ``survey``
         each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
         track (else the stated survey's); ``errors`` their joint covariance (names, (2R, 2R) [m²]: refined together)
-        in each moving tag's consider terms."""
+        in each moving tag's consider terms; ``fitted`` the clocks fitted from the tags' pings and their summary."""
         scored = stated if survey is None else survey
-        clocks, table, clocks_info, synced = kept_study_clocks(resume, sync, assigned, deployments, sound_speed,
-                                                               series, bin_hours, notes, scored, not refine_positions,
-                                                               light and stored)
+        clocks, table, clocks_info, synced = (fitted[0], assigned.hydrophones, fitted[1], None) if fitted else \
+            kept_study_clocks(resume, sync, assigned, deployments, sound_speed, series, bin_hours, notes, scored,
+                              not refine_positions, light and stored)
+        notes.extend([clocks_note(fitted[1])] if fitted else [])
         # the synchronisation's row per sync-tag arrival kept on disk while the tags' matrices are made and the
         # tags tracked (read back for the reference tags' scores and the study's sync/ folder)
         with spilled(synced, "residuals", workdir) if light and synced is not None else contextlib.nullcontext():
@@ -329,6 +333,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             rows: dict[str, dict[str, Any]] = {}
             jobs, matrices, folders = [], {}, {}
             logged = clocks_info["source"].startswith("as logged")
+            lean = light and not fits(clocks_info["source"], again=True)  # (a clocks' fit reads every moving tag's
+            # whole outcome)
             keys = [_key(name, detected) for name, _ in asked]
             first: dict[str, int] = {}  # each tag's folder, by the first name asking for it
             for i, key in enumerate(keys):
@@ -383,7 +389,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                     if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                         options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                     np.isfinite(matrix.toa).any(axis=0))
-                    if light:  # written: its rows let go (a season's matrices are never in memory together), its empty
+                    if lean:  # written: its rows let go (a season's matrices are never in memory together), its empty
                         # tables made anew (a slice of them, a view, would hold them whole)
                         matrix = replace(matrix, toa=np.empty((0, matrix.toa.shape[1])), pings=emptied(matrix.pings))
                     built[i] = (folder, matrix, (folder, workdir / folder / "toa.txt",
@@ -395,7 +401,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                                                                      code)
                 rows[name] = row
             stored_rows = None  # (the last tag's rows; a store's sync-tag rows let go already where synchronised here)
-            if light:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
+            if lean:  # no later stage reads the detections' rows (the tags' matrices are made): not held through the
                 assigned.detections.frame = emptied(assigned.detections.frame)  # tracking (a season's sync tags' rows)
             for i in sorted(built):  # in the order asked, whatever the order read
                 folder, matrix, job, said = built.pop(i)
@@ -414,9 +420,9 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             by_folder = {folder: name for name, folder in folders.items()}
             specs = dict(asked)
             tick = clock.perf_counter()
-            parts = TrackParts(workdir) if light and not keep_tracks else None
+            parts = TrackParts(workdir) if lean and not keep_tracks else None
             finish = {f: partial(written_main, out=workdir / f) for f, *_ in jobs  # a tag's files written as it ends
-                      if light and specs[by_folder[f]].role != "reference"}  # (in its worker, on this machine)
+                      if lean and specs[by_folder[f]].role != "reference"}  # (in its worker, on this machine)
 
             def done(folder: str, result):
                 name = by_folder[folder]
@@ -457,10 +463,14 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
     stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)
-    outcome = attempt(deployments, assigned, list(notes), workdir)
+    outcome, fitted = attempt(deployments, assigned, list(notes), workdir), None
+    if fits(outcome.summary["clocks"]["source"]):  # clocks taken as logged: checked against the tags' pings
+        outcome, fitted = fitted_study(outcome, lambda f: attempt(deployments, assigned, list(notes), workdir,
+                                                                  fitted=f), deployments, assigned.kept_span(),
+                                       workdir, TAGS_FOLDER)
     if refine_positions:
         outcome = refined_study(outcome, lambda d, a, q, e: attempt(d, a, list(notes), workdir / REFINED_FOLDER, q,
-                                                                    e),
+                                                                    e, fitted),
                                 deployments, assigned, SURVEY_SIGMA if survey_sigma is None else survey_sigma,
                                 workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun

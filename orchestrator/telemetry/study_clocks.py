@@ -23,6 +23,8 @@ TOO_COARSE = "as logged (times too coarse to synchronise)"
 #: The clocks' source where the deployments' sync tags are not heard by two receivers (the detections hold none of them,
 #: or each is heard by its own receiver alone).
 UNHEARD = "as logged (no sync tag heard)"
+#: The clocks' source where no deployment names a sync tag.
+NO_SYNC_TAG = "as logged (no sync tag)"
 
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
@@ -90,7 +92,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
                  "no deployment has a sync tag: the receivers' clocks are taken as logged (synchronised already); "
                  "give the deployments' sync tags (transmitter column) or --sync DIR where they are not")
     source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone else UNHEARD if unheard
-              else "as logged (no sync tag)")
+              else NO_SYNC_TAG)
     return logged_clocks(table["receiver"].tolist(), float(np.floor(first)), float(np.ceil(last))), \
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
 
@@ -110,4 +112,4 @@ def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict
     return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
-__all__ = ["TOO_COARSE", "UNHEARD", "study_clocks", "taken_survey"]
+__all__ = ["NO_SYNC_TAG", "TOO_COARSE", "UNHEARD", "study_clocks", "taken_survey"]

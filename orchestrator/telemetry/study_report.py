@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from sblsim.orchestrator.sync.survey_console import survey_line
+from sblsim.orchestrator.telemetry.study_clocks import UNHEARD
 from sblsim.orchestrator.tracks.depth import water_line
 from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE
 from sblsim.orchestrator.tracks.tracker import noise_line
@@ -52,7 +53,9 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append("  clocks taken as logged: the sync tags' times are rounded too coarsely to synchronise them "
                    "(the note below)")
     else:
-        out.append("  clocks taken as logged (no sync tag in the receivers file)")
+        out.append("  clocks taken as logged (" + ("no sync tag heard by two receivers" if c["source"] == UNHEARD
+                                                   else "no sync tag in the receivers file")
+                   + "), checked against the moving tags' pings once they are tracked")
     if "toa_noise" in s:
         out.append("  " + noise_line(s["toa_noise"]))
     if s.get("water_depth"):
@@ -199,6 +202,12 @@ def study_lines(outcome: Any) -> list[tuple[str, bool]]:
     if resumed:
         what = " and ".join([f"{resumed['tags_kept']} of {resumed['tags']} tags"] + resumed["taken"])
         kept.append((f"resumed: {what} kept from an interrupted run of this output (their inputs unchanged)", False))
+    checked = outcome.summary["clocks"].get("checked") or {}
+    if checked.get("held_out"):  # clocks taken as logged, fitted from the tags' pings no better (else a note says)
+        held = checked["held_out"]
+        kept.append((f"clocks: the moving tags' pings left out fit the clocks as logged as well as clocks fitted from "
+                     f"the others (chi2 per degree of freedom {held['logged_chi2_per_dof']:.3g} as logged, "
+                     f"{held['fitted_chi2_per_dof']:.3g} fitted): taken as logged", False))
     return (kept + tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
             + lines(outcome.summary.get("positions")))
 

@@ -17,7 +17,8 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_UTM
 from sblsim.orchestrator.telemetry.report.figures_study import summary_value
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
-from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE
+from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, UNHEARD
+from sblsim.orchestrator.telemetry.study_offsets import FITTED
 from sblsim.orchestrator.telemetry.study_positions import lines as position_lines
 from sblsim.orchestrator.telemetry.study_report import reference_lines, tag_lines
 
@@ -91,8 +92,17 @@ def _clocks(s: dict[str, Any]) -> list[dict[str, str]]:
                                                                             "before: sblsim sync --out DIR)"},
                 {"what": "synchronisation bins", "taken": f"{clocks.get('bin_hours')} h", "how": "as given, else 1 h",
                  "option": "--bin-hours H"}]
+    if source == FITTED:
+        return [{"what": "clocks", "taken": f"fitted from the moving tags' pings against "
+                                           f"{clocks.get('reference_receiver')}",
+                 "how": "the default where the clocks taken as logged were off (no sync tag heard by two receivers)",
+                 "option": "the deployments' sync tags (transmitter column) or --sync DIR"}]
     why = ("the sync tags' times are too coarse to synchronise" if source == TOO_COARSE else
-           "one receiver" if "one receiver" in source else "no deployment has a sync tag")
+           "one receiver" if "one receiver" in source else "no sync tag heard by two receivers" if source == UNHEARD
+           else "no deployment has a sync tag")
+    if clocks.get("checked"):
+        why += "; " + ("the tags' pings fit them as well as clocks fitted from them"
+                       if (clocks["checked"] or {}).get("held_out") else "not checked against the tags' pings")
     return [{"what": "clocks", "taken": "as logged", "how": f"the default: {why}",
              "option": "the deployments' sync tags (transmitter column) or --sync DIR"}]
 

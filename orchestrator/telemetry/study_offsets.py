@@ -1,0 +1,218 @@
+"""A study's clocks taken as logged, fitted from its moving tags' own pings where they are off.
+
+A study whose deployments name no sync tag, or whose sync tags no two receivers hear (a network's extract of a tag
+project), has its clocks taken as logged (:func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks`). A
+receiver's clock set from a computer at deployment and corrected for its drift at offload is off by milliseconds to
+seconds, and a millisecond is a metre and a half of range: tracked on such clocks, a tag's fixes are off by tens of
+metres with a σ of one or two (the clocks' error is in no σ). So the clocks are checked against the moving tags'
+pings: each receiver's offset from its time as logged, linear in time from the study's first detection to its last
+(an offset and a drift, as a receiver's clock keeps), is fitted with the pings' places and emission times
+(:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias, the positions held
+at the survey's, a ping heard by four receivers or more), one receiver's clock the time base (the one heard most: a
+clock common to every receiver changes no position). The fitted clocks are taken only where the pings each block of
+the record left out of the fit are fixed better with them than with the clocks as logged
+(:func:`~sblsim.models.tracking.held_out.held_out`); the study is then made again on them (every tag tracked again),
+and its clocks are said to be fitted from the tags' pings (``study.json`` ``clocks``). Elsewhere the clocks stay as
+logged, and the study says whether they were checked. A receiver no such ping reaches keeps its clock as logged (a
+note names it).
+
+This is the idea of an array synchronised from its own tags' pings, where it has no sync tag (the moving tags' pings
+as a self-calibration's: Triggs et al., "Bundle adjustment — a modern synthesis", LNCS 1883, 1999, § 6.1). Offsets
+far beyond the time the sound takes across the array (seconds) split a ping's arrivals before any fit: such a study's
+pings are never heard by four receivers at once, and its clocks stay as logged, said.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from sblsim.models.declarations import ModelError
+from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
+from sblsim.models.tracking.receiver_positions import refine_receivers
+from sblsim.orchestrator.sync.clocks import Clocks
+from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
+from sblsim.orchestrator.telemetry.study_positions import _moving, _pings
+
+#: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
+#: receivers), and the source of clocks so fitted.
+FITTED_FROM = (NO_SYNC_TAG, UNHEARD)
+FITTED = "fitted from the tags' pings"
+#: The prior σ [s] of a clock's offset from its time as logged at the study's first and last detection: a receiver
+#: set from a computer at deployment and corrected for its drift at offload (a VR2W's clock drifts by seconds a month).
+CLOCK_PRIOR = 1.0
+#: The σ [m] the receivers' positions are held at in the fit (the survey's: not refined here) and the σ [s] of the
+#: time base's clock (its offset 0).
+HELD_SIGMA, BASE_SIGMA = 0.01, 1e-7
+#: The prior σ [1] of the sound speed's scale fitted with the clocks where the tags' were calibrated from their
+#: pings (5 %: 75 m/s, the calibration's spread on clocks off by tens of milliseconds).
+SPEED_PRIOR = 0.05
+#: The rounds at most of the fit (each: the study made again on the clocks fitted, and they fitted again from it).
+ROUNDS = 3
+#: The most a fitted clock's offset σ [s] may be (at either end of the study) for it to be taken: a clock the pings
+#: tie to the time base no better stays as logged.
+MAX_CLOCK_SIGMA = 1e-3
+
+
+@dataclass
+class ClockFit:
+    """The clocks fitted from a study's moving tags' pings (:func:`fit_clocks`): ``clocks`` (the receivers the pings
+    tie to the time base, each one's offset at the study's first and last detection), ``summary`` (``study.json``'s
+    ``clocks``) and ``helps`` (the held-out pings fit them better than the clocks the study was made on)."""
+
+    clocks: Clocks
+    summary: dict[str, Any]
+    helps: bool
+
+
+def fits(source: str, again: bool = False) -> bool:
+    """Whether clocks of this source (``study.json`` ``clocks.source``) are fitted from the tags' pings (with
+    ``again``: or fitted again, clocks so fitted being a round's)."""
+    return source in FITTED_FROM or (again and source == FITTED)
+
+
+def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | None = None) -> ClockFit:
+    """The receivers' clocks fitted from a study's moving tags' pings (the module docstring).
+
+    Parameters
+    ----------
+    outcome : StudyOutcome
+        The study made on the clocks ``on`` (its moving tags' matrices and tracks: the pings and their places).
+    deployments : Deployments
+        Its deployments (the receivers' surveyed positions).
+    span : tuple of float
+        [s since 1970 UTC] the study's first and last detection: the clocks' two knots (an offset and a drift).
+    on : Clocks, optional
+        The clocks the study was made on (an earlier round's fit, with the same knots): the offsets fitted are added
+        to theirs. None: as logged.
+
+    Returns
+    -------
+    ClockFit
+
+    Raises
+    ------
+    ModelError
+        No moving tag tracked, or none heard by four receivers at once (one line).
+    """
+    moving = _moving(outcome)
+    if not moving:
+        raise ModelError("no moving tag was tracked (a reference tag is a check, never in the fit)")
+    names = [str(n) for n in deployments.table["receiver"]]
+    axes = ["x", "y", "z"][:outcome.matrices[moving[0]].positions.shape[1]]
+    receivers = deployments.table[axes].to_numpy(float)
+    toa, places, c, sigma, tags, times = _pings(outcome.outcomes, outcome.matrices, moving, names)
+    heard = (np.isfinite(toa).sum(axis=1) >= 4)[:, None] & np.isfinite(toa)
+    base = int(np.argmax(heard.sum(axis=0))) if on is None else names.index(on.reference() or on.receivers[0])
+    speed = float(np.median(c))
+    prior = np.full(len(names), CLOCK_PRIOR * speed)
+    prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted
+    edges = np.array([span[0], max(span[1], span[0] + 1.0)]) if on is None else on.edges
+    kwargs = {"biases": True, "times": times, "edges": edges, "rescale": True, "bias_sigma": prior}
+    # a sound speed calibrated from the pings on the clocks as logged took up their error: one for every ping,
+    # fitted with the clocks (the positions held: the pings' ranges set its scale)
+    calibrated = all(str(outcome.outcomes[f].summary["sound_speed"]["source"]).startswith(("calibrated", "fallback"))
+                     for f in moving)
+    if calibrated:
+        c, kwargs["speed_sigma"] = np.full(len(c), speed), SPEED_PRIOR
+    fit = refine_receivers(toa, receivers, places, c, sigma, HELD_SIGMA, **kwargs)  # refused in one line: no ping
+    check = held_out(toa, receivers, places, c, sigma, HELD_SIGMA, **kwargs)
+    fitted = speed * fit.speed_scale  # [m/s] (the speed given where not fitted)
+    knots, spread = fit.bias / fitted, fit.bias_sigma.max(axis=1) / fitted  # [s]: a range bias is its clock's offset
+    taken = fit.arrivals > 0  # (a clock the pings tie loosely: :func:`tied`)
+    taken[base] = True
+    if on is not None:  # the corrections added to the clocks the study was made on (its receivers alone)
+        taken &= np.isin(names, on.receivers)
+        knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else [0.0, 0.0]
+                                  for n in names])
+    knots -= knots[base]
+    kept = np.flatnonzero(taken)
+    clocks = Clocks([names[k] for k in kept], edges, knots[kept], clock_sigma=np.where(kept == base, 0.0,
+                                                                                       spread[kept]))
+    largest = kept[int(np.argmax(np.abs(knots[kept]).max(axis=1)))]
+    summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
+               "not_synchronised": [n for n, t in zip(names, taken) if not t], "tags": tags, "pings": int(fit.pings),
+               "largest_offset_s": float(np.abs(knots[largest]).max()), "largest_offset_receiver": names[largest],
+               "offsets_s": {names[k]: knots[k].tolist() for k in kept},
+               "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
+               "sound_speed_m_s": fitted if calibrated else None,
+               "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
+                            "pings": check.pings, "folds": check.folds.tolist(), "helps": check.helps,
+                            "rule": f"the fitted clocks' median chi2 per degree of freedom of the pings left out at "
+                                    f"most {1 - HELD_OUT_GAIN:g} of the clocks' the study was made on, and lower in "
+                                    f"most blocks"},
+               "converged": fit.converged}
+    return ClockFit(clocks, summary, check.helps)
+
+
+def fitted_study(outcome, again: Callable[[tuple], Any], deployments, span: tuple[float, float], workdir: Path,
+                 tags_folder: str) -> tuple[Any, tuple | None]:
+    """A study on clocks taken as logged (:func:`fits`) made again by ``again(fitted)`` on the clocks fitted from its
+    moving tags' pings where the held-out pings say they help (:func:`fit_clocks`; ``fitted`` the clocks and their
+    summary), its tags' folders (``tags_folder`` in ``workdir``) made anew, and fitted again from that study's tags
+    until the pings left out say the clocks help no more (:data:`ROUNDS` at most: a round's pings, placed on better
+    clocks, tie them closer); else the study as it is, its ``clocks`` saying whether they were checked
+    (``checked``). Returns the study and ``fitted`` (None: the clocks as logged)."""
+    fitted, rounds = None, []
+    while len(rounds) < ROUNDS:
+        try:
+            fit = fit_clocks(outcome, deployments, span, None if fitted is None else fitted[0])
+        except ModelError as exc:
+            if fitted is None:
+                outcome.summary["clocks"]["checked"] = {"fitted": False, "reason": str(exc)}
+                outcome.summary["notes"].append(f"the clocks taken as logged are not checked against the tags' "
+                                                f"pings: {exc}")
+                return outcome, None
+            break
+        held = fit.summary["held_out"]
+        rounds.append({"chi2_per_dof_before": held["logged_chi2_per_dof"],
+                       "chi2_per_dof_after": held["fitted_chi2_per_dof"], "taken": fit.helps})
+        if not fit.helps:
+            break
+        shutil.rmtree(workdir / tags_folder, ignore_errors=True)
+        fitted = (fit.clocks, fit.summary | {"rounds": rounds})
+        outcome = again(fitted)
+    if fitted is None:
+        outcome.summary["clocks"]["checked"] = fit.summary | {"source": "as logged", "fitted": False}
+        return outcome, None
+    loose = tied(fitted[0], fit.summary["offset_sigma_s"])
+    if loose:  # the study made once more without the clocks its pings tie no closer than MAX_CLOCK_SIGMA
+        fitted = (_without(fitted[0], loose), fitted[1] | {"not_synchronised": fitted[1]["not_synchronised"] + loose,
+                                                           "loosely_tied": loose})
+        shutil.rmtree(workdir / tags_folder, ignore_errors=True)
+        outcome = again(fitted)
+    outcome.summary["clocks"]["rounds"] = rounds
+    return outcome, fitted
+
+
+def tied(clocks: Clocks, sigma: dict[str, float]) -> list[str]:
+    """The receivers of ``clocks`` whose offset's σ (``sigma`` [s] by receiver: a fit's on these clocks, the last)
+    exceeds :data:`MAX_CLOCK_SIGMA` at either end of the study: tied to the time base too loosely to be taken."""
+    return [n for n in clocks.receivers if sigma.get(n, 0.0) > MAX_CLOCK_SIGMA]
+
+
+def _without(clocks: Clocks, names: list[str]) -> Clocks:
+    """``clocks`` less the receivers ``names``."""
+    keep = [k for k, n in enumerate(clocks.receivers) if n not in names]
+    return Clocks([clocks.receivers[k] for k in keep], clocks.edges, clocks.knots[keep],
+                  clock_sigma=clocks.clock_sigma[keep])
+
+
+def note(summary: dict[str, Any]) -> str:
+    """The study's note of clocks fitted from its tags' pings (:func:`fitted_study`'s summary, with its rounds)."""
+    rounds = [r for r in summary["rounds"] if r["taken"]]
+    untaken = summary["not_synchronised"]
+    return (f"the receivers' clocks, taken as logged, were off: fitted from {len(summary['tags'])} moving tags' "
+            f"{summary['pings']:,} pings against {summary['reference_receiver']} in {len(rounds)} round{'s' if len(rounds) > 1 else ''} (largest "
+            f"offset {summary['largest_offset_s'] * 1e3:.3g} ms, {summary['largest_offset_receiver']}; the pings "
+            f"left out fit them with chi2 per degree of freedom {rounds[-1]['chi2_per_dof_after']:.3g}, the clocks "
+            f"as logged {rounds[0]['chi2_per_dof_before']:.3g})" + (
+                f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
+                f"detections not used: {', '.join(untaken)}" if untaken else ""))
+
+
+__all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "fit_clocks", "fits", "fitted_study", "note"]
