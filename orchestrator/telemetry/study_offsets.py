@@ -207,7 +207,8 @@ def note(summary: dict[str, Any]) -> str:
     rounds = [r for r in summary["rounds"] if r["taken"]]
     untaken = summary["not_synchronised"]
     return (f"the receivers' clocks, taken as logged, were off: fitted from {len(summary['tags'])} moving tags' "
-            f"{summary['pings']:,} pings against {summary['reference_receiver']} in {len(rounds)} round{'s' if len(rounds) > 1 else ''} (largest "
+            f"{summary['pings']:,} pings against {summary['reference_receiver']} in {len(rounds)} "
+            f"round{'s' if len(rounds) > 1 else ''} (largest "
             f"offset {summary['largest_offset_s'] * 1e3:.3g} ms, {summary['largest_offset_receiver']}; the pings "
             f"left out fit them with chi2 per degree of freedom {rounds[-1]['chi2_per_dof_after']:.3g}, the clocks "
             f"as logged {rounds[0]['chi2_per_dof_before']:.3g})" + (

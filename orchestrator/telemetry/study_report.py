@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 from sblsim.orchestrator.sync.survey_console import survey_line
-from sblsim.orchestrator.telemetry.study_clocks import UNHEARD
 from sblsim.orchestrator.tracks.depth import water_line
 from sblsim.orchestrator.tracks.speed import REPLACED_SOURCE
 from sblsim.orchestrator.tracks.tracker import noise_line
@@ -53,6 +52,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
         out.append("  clocks taken as logged: the sync tags' times are rounded too coarsely to synchronise them "
                    "(the note below)")
     else:
+        from sblsim.orchestrator.telemetry.study_clocks import UNHEARD  # numpy: loaded with the study
+
         out.append("  clocks taken as logged (" + ("no sync tag heard by two receivers" if c["source"] == UNHEARD
                                                    else "no sync tag in the receivers file")
                    + "), checked against the moving tags' pings once they are tracked")
