@@ -292,3 +292,35 @@ def test_each_receivers_timing_noise_is_its_own_residuals_with_rescale():
     assert np.all(np.abs(rescaled.sigma[:8] / SIGMA - 1.0) < 0.2), rescaled.sigma / SIGMA
     # in the array's shape (its worst direction: the path's geometry's more than the noise's)
     assert np.all(rescaled.sigma_ratio[:8] < plain.sigma_ratio[:8]), (rescaled.sigma_ratio, plain.sigma_ratio)
+
+
+def test_clocks_off_by_tens_of_milliseconds_are_fitted_with_their_own_prior():
+    """Clocks taken as logged (no sync tag), each off by up to ±30 ms (45 m of range) and drifting, the positions
+    right: each receiver's range bias fitted with a broad prior of its own (``bias_sigma``: 1 s of range), one
+    receiver's tiny (the time base), the shifts held at 1 cm. Each clock's offset at both knots comes back within
+    4 σ of its truth less the time base's (the simulated clocks), a few tenths of a millisecond; with the survey's
+    σ as the biases' prior (the default) the biases cannot reach it."""
+    rng = np.random.default_rng(11)
+    receivers = rng.uniform(0.0, 400.0, (8, 2))
+    toa, path = _towed(rng, receivers, pings=400, late=0.0)
+    times = np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1)
+    edges = np.array([0.0, times[np.isfinite(times)].max() + 1.0])
+    clock = np.c_[rng.uniform(-0.03, 0.03, 8), np.zeros(8)]
+    clock[:, 1] = clock[:, 0] + rng.uniform(-5e-6, 5e-6, 8) * edges[1]  # a drift of up to 5 ppm
+    toa = toa + np.stack([np.interp(times, edges, knots) for knots in clock], axis=1)
+    starts = fix_pings(toa, receivers, C, SIGMA)[0]
+    prior = np.full(8, 1.0 * C)
+    prior[0] = 1e-7 * C
+    fit = refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=prior,
+                           times=times, edges=edges)
+    truth = (clock - clock[0]) * C  # [m] of range, against receiver 0's clock
+    assert np.all(np.abs(fit.bias - truth) < 4 * fit.bias_sigma + 1e-3), \
+        np.abs(fit.bias - truth) / fit.bias_sigma
+    assert np.abs(fit.bias - truth).max() < 0.5 * C * 1e-3  # within half a millisecond
+    assert np.abs(fit.fitted).max() < 0.05  # the positions held
+    survey = refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, times=times, edges=edges)
+    assert np.abs(survey.bias - survey.bias[0] - truth).max() > 10.0
+    with pytest.raises(ModelError, match="range biases' prior sigma"):
+        refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=np.zeros(8))
+    with pytest.raises(ModelError, match="range biases' prior sigma"):
+        refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=np.ones(3))
