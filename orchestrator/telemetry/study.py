@@ -67,7 +67,7 @@ from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, taken_survey
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
-from sblsim.orchestrator.telemetry.study_offsets import fits, fitted_study
+from sblsim.orchestrator.telemetry.study_offsets import aligned, fits, fitted_study
 from sblsim.orchestrator.telemetry.study_offsets import note as clocks_note
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
@@ -122,6 +122,8 @@ class StudyOutcome:
         The tags' folders written already (``write_tags``: their outcomes hold their track alone, matrices no rows).
     parts : TrackParts or None
         ``tracks.csv`` a tag at a time from the tags' own files (``keep_tracks`` False: the outcomes hold no track).
+    clocks : Clocks or None
+        The clocks the tags were tracked on.
     """
 
     tracks: pd.DataFrame | None
@@ -135,6 +137,7 @@ class StudyOutcome:
     positions: Any = None
     written: set = field(default_factory=set)
     parts: TrackParts | None = None
+    clocks: Any = None
 
 
 #: The folder of the tags' folders in a study's folder (``tags/<id>/``: an id such as ``sync`` or ``tracks.csv`` is
@@ -321,6 +324,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             kept_study_clocks(resume, sync, assigned, deployments, sound_speed, series, bin_hours, notes, scored,
                               not refine_positions, light and stored)
         notes.extend([clocks_note(fitted[1])] if fitted else [])
+        clocks, clocks_info = (clocks, clocks_info) if fitted else aligned(clocks, clocks_info, assigned, table)
         # the synchronisation's row per sync-tag arrival kept on disk while the tags' matrices are made and the
         # tags tracked (read back for the reference tags' scores and the study's sync/ folder)
         with spilled(synced, "residuals", workdir) if light and synced is not None else contextlib.nullcontext():
@@ -457,7 +461,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
         return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily,
-                            written={f for f in outcomes if outcomes[f].estimates is None}, parts=parts)
+                            written={f for f in outcomes if outcomes[f].estimates is None}, parts=parts,
+                            clocks=clocks)
 
     light = write_tags and not refine_positions  # the refinement reads every moving tag's matrix and estimates
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()

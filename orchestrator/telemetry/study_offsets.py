@@ -30,8 +30,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+import pandas as pd
 
 from sblsim.models.declarations import ModelError
+from sblsim.models.sync.coarse_lags import coarse_offsets
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
 from sblsim.orchestrator.sync.clocks import Clocks
@@ -51,8 +53,12 @@ HELD_SIGMA, BASE_SIGMA = 0.01, 1e-7
 #: The prior σ [1] of the sound speed's scale fitted with the clocks where the tags' were calibrated from their
 #: pings (5 %: 75 m/s, the calibration's spread on clocks off by tens of milliseconds).
 SPEED_PRIOR = 0.05
+#: The slowest sound speed [m/s] and a margin [s] of the time the sound takes across the array, the largest lag [s]
+#: between two clocks looked for, and the windows [s] of a coarse alignment (:func:`aligned`: a clock drifting by
+#: 20 ppm moves by 0.2 s in one).
+SLOWEST, CROSSING_MARGIN, MAX_LAG, WINDOW = 1400.0, 0.05, 120.0, 3 * 3600.0
 #: The rounds at most of the fit (each: the study made again on the clocks fitted, and they fitted again from it).
-ROUNDS = 3
+ROUNDS = 4
 #: The most a fitted clock's offset σ [s] may be (at either end of the study) for it to be taken: a clock the pings
 #: tie to the time base no better stays as logged.
 MAX_CLOCK_SIGMA = 1e-3
@@ -73,6 +79,44 @@ def fits(source: str, again: bool = False) -> bool:
     """Whether clocks of this source (``study.json`` ``clocks.source``) are fitted from the tags' pings (with
     ``again``: or fitted again, clocks so fitted being a round's)."""
     return source in FITTED_FROM or (again and source == FITTED)
+
+
+def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Clocks, dict[str, Any]]:
+    """Clocks taken as logged (``clocks``, ``info`` their summary: :func:`fits`) aligned coarsely from the tags the
+    receivers hear together where two of them disagree by more than the time the sound takes across the array
+    (:func:`~sblsim.models.sync.coarse_lags.coarse_offsets`: each pair's lag where its detections' differences pile
+    up, the receivers' offsets by least squares in windows of :data:`WINDOW` s, the receiver with the most detections
+    the time base), the start of the fine fit (:func:`fit_clocks`); else as they are. A receiver no pair ties to the
+    time base is left out (not synchronised). ``assigned`` the detections at their deployments, ``table`` the
+    receivers (``receiver``, ``x``, ``y``, ``sync_tag``)."""
+    if not fits(info["source"]):
+        return clocks, info
+    names = [str(n) for n in table["receiver"]]
+    frame = assigned.detections.frame
+    frame = frame[~frame["tag"].isin(set(table["sync_tag"]) - {""})]  # (none heard by two receivers)
+    xy = table[["x", "y"]].to_numpy(float)
+    crossing = float(np.linalg.norm(xy[:, None] - xy[None], axis=2).max()) / SLOWEST + CROSSING_MARGIN
+    receiver = frame["receiver"].map({n: k for k, n in enumerate(names)}).to_numpy()
+    if not len(frame) or len(names) < 2:
+        return clocks, info
+    time = frame["time"].to_numpy(float)
+    span = clocks.edges[0], clocks.edges[-1]
+    edges = np.linspace(span[0], span[1], max(int(np.ceil((span[1] - span[0]) / WINDOW)), 1) + 1)
+    base = int(np.bincount(receiver, minlength=len(names)).argmax())
+    lags = coarse_offsets(receiver, pd.factorize(frame["tag"])[0], time, len(names), edges, MAX_LAG, crossing, base)
+    if lags.largest_lag <= crossing:  # the clocks as logged agree to within a crossing: the fine fit's to say
+        return clocks, info
+    tied = np.isfinite(lags.offsets).any(axis=1)
+    knots = np.array([np.interp(lags.centres, lags.centres[np.isfinite(o)], o[np.isfinite(o)]) if t else
+                      np.zeros(len(lags.centres)) for o, t in zip(lags.offsets, tied)])
+    at = lags.centres if len(lags.centres) > 1 else np.array(span)
+    knots = knots if len(lags.centres) > 1 else np.repeat(knots, 2, axis=1)
+    kept = np.flatnonzero(tied)
+    coarse = Clocks([names[k] for k in kept], at, knots[kept])
+    summary = {"largest_lag_s": lags.largest_lag, "crossing_s": crossing, "pairs": lags.pairs,
+               "windows": len(lags.centres), "time_base": names[base],
+               "not_tied": [n for n, t in zip(names, tied) if not t]}
+    return coarse, info | {"coarse": summary}
 
 
 def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | None = None) -> ClockFit:
@@ -158,9 +202,10 @@ def fitted_study(outcome, again: Callable[[tuple], Any], deployments, span: tupl
     clocks, tie them closer); else the study as it is, its ``clocks`` saying whether they were checked
     (``checked``). Returns the study and ``fitted`` (None: the clocks as logged)."""
     fitted, rounds = None, []
+    start = outcome.clocks if "coarse" in outcome.summary["clocks"] else None  # (aligned coarsely: :func:`aligned`)
     while len(rounds) < ROUNDS:
         try:
-            fit = fit_clocks(outcome, deployments, span, None if fitted is None else fitted[0])
+            fit = fit_clocks(outcome, deployments, span, start if fitted is None else fitted[0])
         except ModelError as exc:
             if fitted is None:
                 outcome.summary["clocks"]["checked"] = {"fitted": False, "reason": str(exc)}
@@ -216,4 +261,5 @@ def note(summary: dict[str, Any]) -> str:
                 f"detections not used: {', '.join(untaken)}" if untaken else ""))
 
 
-__all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "fit_clocks", "fits", "fitted_study", "note"]
+__all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
+           "fitted_study", "note"]
