@@ -58,12 +58,16 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
              biases: bool = False, anchored: tuple[np.ndarray, ...] | None = None,
              speed_sigma: float | None = None, times: np.ndarray | None = None,
              edges: np.ndarray | None = None, rescale: bool = False,
-             bias_sigma: float | np.ndarray | None = None) -> HeldOut:
+             bias_sigma: float | np.ndarray | None = None, clocks: bool = False) -> HeldOut:
     """Each of ``folds`` consecutive blocks of the pings left out of the refinement in turn, then fixed alone with
     the surveyed and with the refined array (the module docstring). Arguments as :func:`refine_receivers` (the
     anchored pings in every refinement, the refined array's times less its biases at the pings' ``times``); the
     blocks' pings fixed with every arrival (no gate: a receiver's error is what is measured), each from its place or
-    the fix's own start (the better), their depth kept at the places' in 3-D.
+    the fix's own start (the better), their depth kept at the places' in 3-D. With ``clocks`` (the clocks' offsets
+    fitted, the positions held: :mod:`sblsim.orchestrator.telemetry.study_offsets`), block k holds every
+    ``folds``-th ping from the k-th instead (biases with knots in time that only a left-out stretch of the record
+    would tie are tied by the pings around each left-out one) and both arrays' pings are fixed at the fitted sound
+    speed (what is checked is the clocks, not a speed the pings' fixes would take up anyway).
 
     Returns
     -------
@@ -78,7 +82,7 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
     times = None if times is None else np.asarray(times, float)
     usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= MIN_ARRIVALS)
     per_fold, pooled = [], [[], []]
-    for block in np.array_split(usable, folds):
+    for block in ([usable[k::folds] for k in range(folds)] if clocks else np.array_split(usable, folds)):
         keep = np.ones(len(toa), bool)
         keep[block] = False
         refined = refine_receivers(toa[keep], receivers, places[keep], c[keep], sigma, survey_sigma, dof, biases,
@@ -93,7 +97,8 @@ def held_out(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray, c: floa
         fitted = refined.determined if bias_sigma is None else refined.arrivals > 0
         corrected = toa[block] - np.where(fitted[None], bias, 0.0) / speed[:, None]
         medians = []
-        for k, (array, arrivals, at) in enumerate(((receivers, toa[block], c[block]), (moved, corrected, speed))):
+        before = speed if clocks else c[block]
+        for k, (array, arrivals, at) in enumerate(((receivers, toa[block], before), (moved, corrected, speed))):
             ratio = best_fixes(arrivals, array, places[block], at, sigma)[2]
             pooled[k].append(ratio)
             medians.append(np.nanmedian(ratio) if np.isfinite(ratio).any() else np.nan)

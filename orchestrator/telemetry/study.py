@@ -68,7 +68,7 @@ from sblsim.orchestrator.telemetry.reference_tags import score as score_referenc
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, taken_survey
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
 from sblsim.orchestrator.telemetry.study_offsets import aligned, fits, fitted_study
-from sblsim.orchestrator.telemetry.study_offsets import note as clocks_note
+from sblsim.orchestrator.telemetry.study_offsets import said as clocks_said
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
 from sblsim.orchestrator.telemetry.tag_rows import heard_columns, tracked_row, unpositioned
@@ -314,16 +314,18 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         notes.append(rounded)
 
     def attempt(deployments, assigned, notes: list[str], workdir: Path, survey=None, errors=None,
-                fitted=None) -> StudyOutcome:
+                fitted=None, untracked=None) -> StudyOutcome:
         """The study from its clocks on, on these deployments' positions, its tags' folders in ``workdir``; ``survey``
         each receiver's position's error [m per axis] in the reference tags' and sync tags' scores and in each tag's
         track (else the stated survey's); ``errors`` their joint covariance (names, (2R, 2R) [m²]: refined together)
-        in each moving tag's consider terms; ``fitted`` the clocks fitted from the tags' pings and their summary."""
+        in each moving tag's consider terms; ``fitted`` the clocks and their summary as the tags' pings checked them
+        (:func:`~.study_offsets.fitted_study`); ``untracked`` the tags' matrices made, none tracked (None: where
+        the clocks taken as logged are to be checked)."""
         scored = stated if survey is None else survey
         clocks, table, clocks_info, synced = (fitted[0], assigned.hydrophones, fitted[1], None) if fitted else \
             kept_study_clocks(resume, sync, assigned, deployments, sound_speed, series, bin_hours, notes, scored,
                               not refine_positions, light and stored)
-        notes.extend([clocks_note(fitted[1])] if fitted else [])
+        notes.extend(clocks_said(fitted[1]) if fitted else [])
         clocks, clocks_info = (clocks, clocks_info) if fitted else aligned(clocks, clocks_info, assigned, table)
         # the synchronisation's row per sync-tag arrival kept on disk while the tags' matrices are made and the
         # tags tracked (read back for the reference tags' scores and the study's sync/ folder)
@@ -337,8 +339,8 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             rows: dict[str, dict[str, Any]] = {}
             jobs, matrices, folders = [], {}, {}
             logged = clocks_info["source"].startswith("as logged")
-            lean = light and not fits(clocks_info["source"], again=True)  # (a clocks' fit reads every moving tag's
-            # whole outcome)
+            untracked = fits(clocks_info["source"]) if untracked is None else untracked
+            lean = light and not untracked  # (a clocks' fit reads the tags' matrices)
             keys = [_key(name, detected) for name, _ in asked]
             first: dict[str, int] = {}  # each tag's folder, by the first name asking for it
             for i, key in enumerate(keys):
@@ -419,7 +421,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             summary["toa_noise"] = noise_info
             if water_info:
                 summary["water_depth"] = water_info
-            if started is not None:
+            if started is not None and not untracked:
                 started([j[0] for j in jobs], summary)
             by_folder = {folder: name for name, folder in folders.items()}
             specs = dict(asked)
@@ -444,7 +446,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
 
             kept = 0 if resume is None else resume.kept
             release()  # what making the tags' matrices freed handed back before the tracking
-            results = run_tracks(jobs, workers, scheduler, done, resume, finish) if jobs else {}
+            results = run_tracks(jobs, workers, scheduler, done, resume, finish) if jobs and not untracked else {}
         if resume is not None and (resume.kept > kept or resume.taken):
             summary["resumed"] = {"tags_kept": resume.kept - kept, "tags": len(jobs), "taken": resume.taken[:]}
             resume.taken.clear()
@@ -461,21 +463,21 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
         summary["reference_tags"] = score_references(asked, table_tags, outcomes, deployments, synced, sync, scored)
         summary["wall_time_s"] = clock.perf_counter() - begun
         return StudyOutcome(tracks, table_tags, deployments, summary, outcomes, matrices, synced, tally.daily,
-                            written={f for f in outcomes if outcomes[f].estimates is None}, parts=parts,
-                            clocks=clocks)
+                            written={f for f in outcomes if outcomes[f].estimates is None}, parts=parts, clocks=clocks)
 
     light = write_tags and not refine_positions  # the refinement reads every moving tag's matrix and estimates
     speed_path = None if sound_speed_file is None else Path(sound_speed_file).absolute()
     water_path = None if temperature_path is None else Path(temperature_path).absolute()
     stated = None if refine_positions else survey_sigma  # the survey's stated error in every σ (else the prior)
     outcome, fitted = attempt(deployments, assigned, list(notes), workdir), None
-    if fits(outcome.summary["clocks"]["source"]):  # clocks taken as logged: checked against the tags' pings
-        outcome, fitted = fitted_study(outcome, lambda f: attempt(deployments, assigned, list(notes), workdir,
-                                                                  fitted=f), deployments, assigned.kept_span(),
-                                       workdir, TAGS_FOLDER)
+    speed_given = sound_speed if sound_speed_file is None else None  # (a series: its scale fitted with the clocks)
+    if fits(outcome.summary["clocks"]["source"]):  # clocks taken as logged: checked against the tags' pings first
+        outcome, fitted = fitted_study(outcome, lambda f, u: attempt(deployments, assigned, list(notes), workdir,
+                                                                     fitted=f, untracked=u), deployments,
+                                       assigned.kept_span(), workdir, TAGS_FOLDER, speed_given, toa_sigma)
     if refine_positions:
         outcome = refined_study(outcome, lambda d, a, q, e: attempt(d, a, list(notes), workdir / REFINED_FOLDER, q,
-                                                                    e, fitted),
+                                                                    e, fitted, False),
                                 deployments, assigned, SURVEY_SIGMA if survey_sigma is None else survey_sigma,
                                 workdir, TAGS_FOLDER)
     outcome.summary["wall_time_s"] = clock.perf_counter() - begun

@@ -84,7 +84,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
     named = sorted(set(table["sync_tag"]) - {""})
     first, last = assigned.kept_span()
     alone = len(table) == 1  # one receiver: no other clock to synchronise it against (and nothing to position)
-    notes.append(f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
+    notes.append(note := f"the clocks are taken as logged, not synchronised: {rounded}" if rounded else
                  "one receiver: its clock is taken as logged (no other to synchronise it against)" if alone else
                  f"the clocks are taken as logged (synchronised already), not synchronised: {unheard} (the "
                  f"deployments' {len(named)} sync tags: {', '.join(named[:6])}{', ...' if len(named) > 6 else ''}); "
@@ -94,7 +94,7 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
     source = (TOO_COARSE if rounded else "as logged (one receiver)" if alone else UNHEARD if unheard
               else NO_SYNC_TAG)
     return logged_clocks(table["receiver"].tolist(), float(np.floor(first)), float(np.ceil(last))), \
-        table, {"source": source, "receivers": int(len(table)), "not_synchronised": []}, None
+        table, {"source": source, "receivers": int(len(table)), "not_synchronised": [], "note": note}, None
 
 
 def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:

@@ -36,9 +36,10 @@ from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
+from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
+from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
-from sblsim.orchestrator.telemetry.study_positions import _moving, _pings
 
 #: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
 #: receivers), and the source of clocks so fitted.
@@ -59,9 +60,12 @@ SPEED_PRIOR = 0.05
 SLOWEST, CROSSING_MARGIN, MAX_LAG, WINDOW = 1400.0, 0.05, 120.0, 3 * 3600.0
 #: The rounds at most of the fit (each: the study made again on the clocks fitted, and they fitted again from it).
 ROUNDS = 4
-#: The most a fitted clock's offset σ [s] may be (at either end of the study) for it to be taken: a clock the pings
-#: tie to the time base no better stays as logged.
+#: The most a fitted clock's offset σ [s] may be (its median over the clock's knots) for it to be taken: a clock the
+#: pings tie to the time base no better is not synchronised.
 MAX_CLOCK_SIGMA = 1e-3
+#: The most a clock's offset σ [s] may be in a round of the fit (:func:`fitted_study`: a round's fixes on clocks
+#: still off tie them more loosely than the last's): one tied more loosely is left out of the next round.
+LOOSE_SIGMA = 1e-2
 
 
 @dataclass
@@ -119,20 +123,27 @@ def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Cloc
     return coarse, info | {"coarse": summary}
 
 
-def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | None = None) -> ClockFit:
-    """The receivers' clocks fitted from a study's moving tags' pings (the module docstring).
+def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | None = None,
+               sound_speed: float | None = None, toa_sigma: float | None = None) -> ClockFit:
+    """The receivers' clocks fitted from a study's moving tags' pings (the module docstring), before any is tracked.
 
     Parameters
     ----------
     outcome : StudyOutcome
-        The study made on the clocks ``on`` (its moving tags' matrices and tracks: the pings and their places).
+        The study made on the clocks ``on`` (its moving tags' matrices: each ping starts from its own fix).
     deployments : Deployments
-        Its deployments (the receivers' surveyed positions).
+        Its deployments (the receivers' surveyed positions; in the horizontal plane).
     span : tuple of float
         [s since 1970 UTC] the study's first and last detection: the clocks' two knots (an offset and a drift).
     on : Clocks, optional
-        The clocks the study was made on (an earlier round's fit, with the same knots): the offsets fitted are added
-        to theirs. None: as logged.
+        The clocks the study was made on (a coarse alignment's or an earlier round's fit, with their knots): the
+        offsets fitted are added to theirs. None: as logged.
+    sound_speed : float, optional
+        [m/s] the study's (else :data:`~sblsim.models.tracking.sound_speed.DEFAULT_SOUND_SPEED`, its scale fitted
+        with the clocks with a prior σ of :data:`SPEED_PRIOR`: the positions held, the pings' ranges set it).
+    toa_sigma : float, optional
+        [s] the arrivals' timing noise to start from (else :data:`~sblsim.models.tracking.timing.SIGMA_TOA`; each
+        receiver's is then its own residuals').
 
     Returns
     -------
@@ -141,37 +152,44 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     Raises
     ------
     ModelError
-        No moving tag tracked, or none heard by four receivers at once (one line).
+        No moving tag's matrix made, or none heard by four receivers at once (one line).
     """
-    moving = _moving(outcome)
+    moving = [row["folder"] for row in outcome.tags.to_dict("records") if isinstance(row["folder"], str)
+              and row["folder"] in outcome.matrices and row["role"] != "reference" and row["motion"] == "moving"]
     if not moving:
-        raise ModelError("no moving tag was tracked (a reference tag is a check, never in the fit)")
+        raise ModelError("no moving tag's pings (a reference tag is a check, never in the fit)")
     names = [str(n) for n in deployments.table["receiver"]]
-    axes = ["x", "y", "z"][:outcome.matrices[moving[0]].positions.shape[1]]
-    receivers = deployments.table[axes].to_numpy(float)
-    toa, places, c, sigma, tags, times = _pings(outcome.outcomes, outcome.matrices, moving, names)
+    receivers = deployments.table[["x", "y"]].to_numpy(float)
+    column = {n: k for k, n in enumerate(names)}
+    parts, times = [], []
+    for folder in moving:  # each tag's pings on its own origin (every ping has its own emission time)
+        matrix = outcome.matrices[folder]
+        toa = np.full((len(matrix.toa), len(names)), np.nan)
+        toa[:, [column[n] for n in matrix.names]] = matrix.toa
+        parts.append(toa)
+        times.append(np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin)
+    toa, times = np.vstack(parts), np.concatenate(times)
+    times = np.where(np.isfinite(times), times, span[0])
     heard = (np.isfinite(toa).sum(axis=1) >= 4)[:, None] & np.isfinite(toa)
     base = int(np.argmax(heard.sum(axis=0))) if on is None else names.index(on.reference() or on.receivers[0])
-    speed = float(np.median(c))
+    speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
     prior = np.full(len(names), CLOCK_PRIOR * speed)
     prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted
     edges = np.array([span[0], max(span[1], span[0] + 1.0)]) if on is None else on.edges
-    kwargs = {"biases": True, "times": times, "edges": edges, "rescale": True, "bias_sigma": prior}
-    # a sound speed calibrated from the pings on the clocks as logged took up their error: one for every ping,
-    # fitted with the clocks (the positions held: the pings' ranges set its scale)
-    calibrated = all(str(outcome.outcomes[f].summary["sound_speed"]["source"]).startswith(("calibrated", "fallback"))
-                     for f in moving)
-    if calibrated:
-        c, kwargs["speed_sigma"] = np.full(len(c), speed), SPEED_PRIOR
-    fit = refine_receivers(toa, receivers, places, c, sigma, HELD_SIGMA, **kwargs)  # refused in one line: no ping
-    check = held_out(toa, receivers, places, c, sigma, HELD_SIGMA, **kwargs)
+    kwargs = {"biases": True, "times": times, "edges": edges, "rescale": True, "bias_sigma": prior,
+              "speed_sigma": SPEED_PRIOR if sound_speed is None else None}
+    places = np.full((len(toa), 2), np.nan)  # each ping from its own fix
+    sigma = SIGMA_TOA if toa_sigma is None else toa_sigma
+    fit = refine_receivers(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs)  # refused in one line
+    check = held_out(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs, clocks=True)
     fitted = speed * fit.speed_scale  # [m/s] (the speed given where not fitted)
-    knots, spread = fit.bias / fitted, fit.bias_sigma.max(axis=1) / fitted  # [s]: a range bias is its clock's offset
-    taken = fit.arrivals > 0  # (a clock the pings tie loosely: :func:`tied`)
+    # [s]: a range bias is its clock's offset; its σ the median over the knots (a knot at a stretch it hears little)
+    knots, spread = fit.bias / fitted, np.median(fit.bias_sigma, axis=1) / fitted
+    taken = (fit.arrivals > 0) & (spread <= LOOSE_SIGMA)  # (one tied more loosely than MAX_CLOCK_SIGMA: :func:`tied`)
     taken[base] = True
     if on is not None:  # the corrections added to the clocks the study was made on (its receivers alone)
         taken &= np.isin(names, on.receivers)
-        knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else [0.0, 0.0]
+        knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else np.zeros(len(edges))
                                   for n in names])
     knots -= knots[base]
     kept = np.flatnonzero(taken)
@@ -179,11 +197,12 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                                                                                        spread[kept]))
     largest = kept[int(np.argmax(np.abs(knots[kept]).max(axis=1)))]
     summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
-               "not_synchronised": [n for n, t in zip(names, taken) if not t], "tags": tags, "pings": int(fit.pings),
+               "not_synchronised": [n for n, t in zip(names, taken) if not t], "tags": [
+                   outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(np.abs(knots[largest]).max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept},
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
-               "sound_speed_m_s": fitted if calibrated else None,
+               "sound_speed_m_s": fitted,
                "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
                             "pings": check.pings, "folds": check.folds.tolist(), "helps": check.helps,
                             "rule": f"the fitted clocks' median chi2 per degree of freedom of the pings left out at "
@@ -193,50 +212,69 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     return ClockFit(clocks, summary, check.helps)
 
 
-def fitted_study(outcome, again: Callable[[tuple], Any], deployments, span: tuple[float, float], workdir: Path,
-                 tags_folder: str) -> tuple[Any, tuple | None]:
-    """A study on clocks taken as logged (:func:`fits`) made again by ``again(fitted)`` on the clocks fitted from its
-    moving tags' pings where the held-out pings say they help (:func:`fit_clocks`; ``fitted`` the clocks and their
-    summary), its tags' folders (``tags_folder`` in ``workdir``) made anew, and fitted again from that study's tags
-    until the pings left out say the clocks help no more (:data:`ROUNDS` at most: a round's pings, placed on better
-    clocks, tie them closer); else the study as it is, its ``clocks`` saying whether they were checked
-    (``checked``). Returns the study and ``fitted`` (None: the clocks as logged)."""
-    fitted, rounds = None, []
+def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployments, span: tuple[float, float],
+                 workdir: Path, tags_folder: str, sound_speed: float | None = None,
+                 toa_sigma: float | None = None) -> tuple[Any, tuple | None]:
+    """A study whose clocks are taken as logged (:func:`fits`), its tags' matrices made and none tracked
+    (``outcome``), checked against its moving tags' pings (:func:`fit_clocks`) and made again by ``again(clocks,
+    untracked)`` (``clocks`` the clocks and their summary) on the clocks fitted from them where the held-out pings
+    say they help, fitted again from the matrices made on them until the pings left out say the clocks help no more
+    (:data:`ROUNDS` at most: a round's pings, fixed on better clocks, tie them closer), the receivers tied no closer
+    than :data:`MAX_CLOCK_SIGMA` left out; then tracked once (on the clocks as logged where no fit helps), its tags'
+    folders (``tags_folder`` in ``workdir``) made anew, its ``clocks`` saying what was done (``rounds``, or
+    ``checked``: :func:`said`). Returns the study and the clocks it was tracked on, with their summary."""
+    fitted, rounds, checked, taken, first = None, [], None, [], outcome
+    logged = {key: outcome.summary["clocks"].get(key) for key in ("source", "note", "coarse")}  # (said again)
     start = outcome.clocks if "coarse" in outcome.summary["clocks"] else None  # (aligned coarsely: :func:`aligned`)
     while len(rounds) < ROUNDS:
         try:
-            fit = fit_clocks(outcome, deployments, span, start if fitted is None else fitted[0])
+            fit = fit_clocks(outcome, deployments, span, start if fitted is None else fitted[0], sound_speed,
+                             toa_sigma)
         except ModelError as exc:
             if fitted is None:
-                outcome.summary["clocks"]["checked"] = {"fitted": False, "reason": str(exc)}
-                outcome.summary["notes"].append(f"the clocks taken as logged are not checked against the tags' "
-                                                f"pings: {exc}")
-                return outcome, None
+                checked = {"fitted": False, "reason": str(exc)}
+            elif len(taken) > 1:  # the last round's clocks left no pings to fit: the round's before
+                fitted = taken[-2]
             break
         held = fit.summary["held_out"]
         rounds.append({"chi2_per_dof_before": held["logged_chi2_per_dof"],
                        "chi2_per_dof_after": held["fitted_chi2_per_dof"], "taken": fit.helps})
         if not fit.helps:
+            checked = None if fitted is not None else fit.summary | {"source": "as logged", "fitted": False}
             break
-        shutil.rmtree(workdir / tags_folder, ignore_errors=True)
-        fitted = (fit.clocks, fit.summary | {"rounds": rounds})
-        outcome = again(fitted)
-    if fitted is None:
-        outcome.summary["clocks"]["checked"] = fit.summary | {"source": "as logged", "fitted": False}
-        return outcome, None
-    loose = tied(fitted[0], fit.summary["offset_sigma_s"])
-    if loose:  # the study made once more without the clocks its pings tie no closer than MAX_CLOCK_SIGMA
-        fitted = (_without(fitted[0], loose), fitted[1] | {"not_synchronised": fitted[1]["not_synchronised"] + loose,
-                                                           "loosely_tied": loose})
-        shutil.rmtree(workdir / tags_folder, ignore_errors=True)
-        outcome = again(fitted)
-    outcome.summary["clocks"]["rounds"] = rounds
-    return outcome, fitted
+        fitted = (fit.clocks, fit.summary | {"rounds": rounds, "as_logged": logged})
+        taken.append(fitted)
+        outcome = again(fitted, True)
+    if fitted is not None:
+        loose = tied(fitted[0], fitted[1]["offset_sigma_s"])
+        fitted = fitted if not loose else (_without(fitted[0], loose), fitted[1] | {
+            "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose})
+    else:  # the clocks as logged (or aligned coarsely: no fit), checked
+        fitted = (first.clocks, first.summary["clocks"] | ({"checked": checked} if checked else {}))
+    shutil.rmtree(workdir / tags_folder, ignore_errors=True)
+    return again(fitted, False), fitted
+
+
+def said(info: dict[str, Any]) -> list[str]:
+    """The study's notes of its clocks taken as logged, checked against its tags' pings (``info``: ``study.json``'s
+    ``clocks`` as :func:`fitted_study` leaves them)."""
+    if info["source"] == FITTED:
+        return [info["as_logged"]["note"], note(info)]
+    out = [info["note"]] if info.get("note") else []
+    checked, coarse = info.get("checked") or {}, info.get("coarse")
+    if "reason" in checked:
+        out.append(f"the clocks taken as logged are not checked against the tags' pings: {checked['reason']}")
+    if coarse:  # aligned coarsely, not fitted: no σ holds what is left
+        out.append(f"the receivers' clocks as logged disagree by up to {coarse['largest_lag_s']:.3g} s (their "
+                   f"detections of the same tags) and are aligned from those only, to within the time the sound takes "
+                   f"across the array ({coarse['crossing_s']:.2g} s): every position is off by up to "
+                   f"{coarse['crossing_s'] * SLOWEST:.0f} m beyond its sigma")
+    return out
 
 
 def tied(clocks: Clocks, sigma: dict[str, float]) -> list[str]:
     """The receivers of ``clocks`` whose offset's σ (``sigma`` [s] by receiver: a fit's on these clocks, the last)
-    exceeds :data:`MAX_CLOCK_SIGMA` at either end of the study: tied to the time base too loosely to be taken."""
+    exceeds :data:`MAX_CLOCK_SIGMA` (its median over the knots): tied to the time base too loosely to be taken."""
     return [n for n in clocks.receivers if sigma.get(n, 0.0) > MAX_CLOCK_SIGMA]
 
 
@@ -262,4 +300,4 @@ def note(summary: dict[str, Any]) -> str:
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "note"]
+           "fitted_study", "note", "said"]

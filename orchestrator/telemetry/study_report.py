@@ -51,12 +51,20 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
     elif "too coarse" in c["source"]:
         out.append("  clocks taken as logged: the sync tags' times are rounded too coarsely to synchronise them "
                    "(the note below)")
+    elif c["source"] == "fitted from the tags' pings":  # (study_offsets.FITTED: numpy, loaded with the study)
+        out.append(f"  clocks fitted from {len(c['tags'])} moving tags' {c['pings']:,} pings against "
+                   f"{c['reference_receiver']} ({c['receivers']} receivers; taken as logged, "
+                   + ("no sync tag heard by two receivers" if "heard" in c["as_logged"]["source"] else
+                      "no sync tag in the receivers file") + f", they were off by up to {c['largest_offset_s']:.3g} s)"
+                   + (f"; not synchronised: {', '.join(c['not_synchronised'])}" if c["not_synchronised"] else ""))
     else:
-        from sblsim.orchestrator.telemetry.study_clocks import UNHEARD  # numpy: loaded with the study
-
-        out.append("  clocks taken as logged (" + ("no sync tag heard by two receivers" if c["source"] == UNHEARD
-                                                   else "no sync tag in the receivers file")
-                   + "), checked against the moving tags' pings once they are tracked")
+        checked = c.get("checked") or {}
+        held = checked.get("held_out")
+        out.append("  clocks taken as logged (" + ("no sync tag heard by two receivers" if "heard" in c["source"]
+                                                   else "no sync tag in the receivers file") + "): " + (
+            f"the moving tags' pings left out fit them as well as clocks fitted from the others (chi2 per degree of "
+            f"freedom {held['logged_chi2_per_dof']:.3g} as logged, {held['fitted_chi2_per_dof']:.3g} fitted)" if held
+            else f"not checked against the tags' pings ({checked['reason']})" if checked.get("reason") else ""))
     if "toa_noise" in s:
         out.append("  " + noise_line(s["toa_noise"]))
     if s.get("water_depth"):
@@ -203,12 +211,6 @@ def study_lines(outcome: Any) -> list[tuple[str, bool]]:
     if resumed:
         what = " and ".join([f"{resumed['tags_kept']} of {resumed['tags']} tags"] + resumed["taken"])
         kept.append((f"resumed: {what} kept from an interrupted run of this output (their inputs unchanged)", False))
-    checked = outcome.summary["clocks"].get("checked") or {}
-    if checked.get("held_out"):  # clocks taken as logged, fitted from the tags' pings no better (else a note says)
-        held = checked["held_out"]
-        kept.append((f"clocks: the moving tags' pings left out fit the clocks as logged as well as clocks fitted from "
-                     f"the others (chi2 per degree of freedom {held['logged_chi2_per_dof']:.3g} as logged, "
-                     f"{held['fitted_chi2_per_dof']:.3g} fitted): taken as logged", False))
     return (kept + tag_lines(outcome.tags) + reference_lines(outcome.summary.get("reference_tags"))
             + lines(outcome.summary.get("positions")))
 

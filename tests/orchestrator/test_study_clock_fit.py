@@ -68,7 +68,8 @@ def test_clocks_off_by_tens_of_milliseconds_are_fitted_from_the_animals_pings(tm
     assert any(n.startswith("the receivers' clocks, taken as logged, were off: fitted from 3 moving tags'")
                for n in study["notes"]), study["notes"]
     said = capsys.readouterr()
-    assert "clocks taken as logged (no sync tag heard by two receivers), checked against" in said.out
+    assert "clocks fitted from 3 moving tags' 448 pings against" in said.out
+    assert "taken as logged, no sync tag heard by two receivers, they were off by up to" in said.out
     assert "were off: fitted from 3 moving tags'" in said.out + said.err
 
 
@@ -83,6 +84,7 @@ def test_clocks_that_are_right_are_checked_and_kept_as_logged(tmp_path, capsys):
     assert clocks["source"] == NO_SYNC_TAG, clocks
     held = clocks["checked"]["held_out"]
     assert not held["helps"] and held["fitted_chi2_per_dof"] > 0.95 * held["logged_chi2_per_dof"], held
-    assert "clocks: the moving tags' pings left out fit the clocks as logged as well as" in capsys.readouterr().out
+    assert ("clocks taken as logged (no sync tag in the receivers file): the moving tags' pings left out fit them as "
+            "well as clocks fitted from the others") in capsys.readouterr().out
     errors = _errors(sim, out, str(sim.clocks["serial"].iloc[0]))
     assert errors.groupby("tag")["error"].median().max() < 0.5
