@@ -200,7 +200,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                "not_synchronised": [n for n, t in zip(names, taken) if not t], "tags": [
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(np.abs(knots[largest]).max()), "largest_offset_receiver": names[largest],
-               "offsets_s": {names[k]: knots[k].tolist() for k in kept},
+               "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": edges.tolist(),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
                "sound_speed_m_s": fitted,
                "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
@@ -255,6 +255,11 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
     return again(fitted, False), fitted
 
 
+def _seconds(value: float) -> str:
+    """A duration [s] in milliseconds below a second, else in seconds."""
+    return f"{value * 1e3:.3g} ms" if abs(value) < 1.0 else f"{value:.3g} s"
+
+
 def said(info: dict[str, Any]) -> list[str]:
     """The study's notes of its clocks taken as logged, checked against its tags' pings (``info``: ``study.json``'s
     ``clocks`` as :func:`fitted_study` leaves them)."""
@@ -291,8 +296,8 @@ def note(summary: dict[str, Any]) -> str:
     untaken = summary["not_synchronised"]
     return (f"the receivers' clocks, taken as logged, were off: fitted from {len(summary['tags'])} moving tags' "
             f"{summary['pings']:,} pings against {summary['reference_receiver']} in {len(rounds)} "
-            f"round{'s' if len(rounds) > 1 else ''} (largest "
-            f"offset {summary['largest_offset_s'] * 1e3:.3g} ms, {summary['largest_offset_receiver']}; the pings "
+            f"round{'s' if len(rounds) > 1 else ''} (largest offset {_seconds(summary['largest_offset_s'])}, "
+            f"{summary['largest_offset_receiver']}; the pings "
             f"left out fit them with chi2 per degree of freedom {rounds[-1]['chi2_per_dof_after']:.3g}, the clocks "
             f"as logged {rounds[0]['chi2_per_dof_before']:.3g})" + (
                 f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
