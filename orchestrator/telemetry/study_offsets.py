@@ -1,25 +1,33 @@
-"""A study's clocks taken as logged, fitted from its moving tags' own pings where they are off.
+"""A study's clocks taken as logged, checked against its moving tags' own pings before any tag is tracked, and
+fitted from them where they are off.
 
 A study whose deployments name no sync tag, or whose sync tags no two receivers hear (a network's extract of a tag
 project), has its clocks taken as logged (:func:`~sblsim.orchestrator.telemetry.study_clocks.study_clocks`). A
-receiver's clock set from a computer at deployment and corrected for its drift at offload is off by milliseconds to
-seconds, and a millisecond is a metre and a half of range: tracked on such clocks, a tag's fixes are off by tens of
-metres with a σ of one or two (the clocks' error is in no σ). So the clocks are checked against the moving tags'
-pings: each receiver's offset from its time as logged, linear in time from the study's first detection to its last
-(an offset and a drift, as a receiver's clock keeps), is fitted with the pings' places and emission times
-(:func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias, the positions held
-at the survey's, a ping heard by four receivers or more), one receiver's clock the time base (the one heard most: a
-clock common to every receiver changes no position). The fitted clocks are taken only where the pings each block of
-the record left out of the fit are fixed better with them than with the clocks as logged
-(:func:`~sblsim.models.tracking.held_out.held_out`); the study is then made again on them (every tag tracked again),
-and its clocks are said to be fitted from the tags' pings (``study.json`` ``clocks``). Elsewhere the clocks stay as
-logged, and the study says whether they were checked. A receiver no such ping reaches keeps its clock as logged (a
-note names it).
+receiver's clock set from a computer at deployment is off by milliseconds to seconds and drifts, and a millisecond is
+a metre and a half of range: tracked on such clocks, a tag's fixes are off by tens of metres with a σ of one or two
+(the clocks' error is in no σ), or, seconds off, a ping's arrivals split and its tag is refused for a false reason.
+So, the tags' matrices made and none tracked:
 
-This is the idea of an array synchronised from its own tags' pings, where it has no sync tag (the moving tags' pings
-as a self-calibration's: Triggs et al., "Bundle adjustment — a modern synthesis", LNCS 1883, 1999, § 6.1). Offsets
-far beyond the time the sound takes across the array (seconds) split a ping's arrivals before any fit: such a study's
-pings are never heard by four receivers at once, and its clocks stay as logged, said.
+1. where two receivers' clocks disagree by more than the time the sound takes across the array (the lags of their
+   detections of the same tags), they are aligned from those lags (:func:`aligned`,
+   :mod:`~sblsim.models.sync.coarse_lags`), to within that time;
+2. each receiver's offset from the clocks the matrices were made on, linear in time between knots (the study's first
+   and last detection, or the coarse alignment's windows), is fitted with the moving tags' pings' places and emission
+   times, each ping from its own fix (:func:`fit_clocks`;
+   :func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias with a broad prior,
+   the positions held at the survey's, a ping heard by four receivers or more, the sound speed's scale fitted with
+   them where none is given), one receiver's clock the time base (an offset common to every clock moves no
+   position);
+3. the fitted clocks are taken where every fourth ping, left out of the fit in turn, is fixed better with them than
+   with the clocks the matrices were made on (:func:`~sblsim.models.tracking.held_out.held_out`); the matrices are
+   then made again on them and the clocks fitted again, in rounds, until the pings left out say no more
+   (:func:`fitted_study`); a receiver the pings tie no closer than :data:`MAX_CLOCK_SIGMA` is not synchronised;
+4. the tags are tracked once, on the clocks fitted (``study.json`` ``clocks.source`` :data:`FITTED`) or, where no
+   fit helps, as logged (``clocks.checked`` says what the pings left out showed); :func:`said` gives the notes.
+
+This is an array synchronised from its own tags' pings where it has no sync tag (the pings as a self-calibration's:
+Triggs et al., "Bundle adjustment — a modern synthesis", LNCS 1883, 1999, § 6.1). A still tag's pings alone tie no
+clock (its place and the offsets trade); a clock that jumps is not followed.
 """
 
 from __future__ import annotations
@@ -79,10 +87,9 @@ class ClockFit:
     helps: bool
 
 
-def fits(source: str, again: bool = False) -> bool:
-    """Whether clocks of this source (``study.json`` ``clocks.source``) are fitted from the tags' pings (with
-    ``again``: or fitted again, clocks so fitted being a round's)."""
-    return source in FITTED_FROM or (again and source == FITTED)
+def fits(source: str) -> bool:
+    """Whether clocks of this source (``study.json`` ``clocks.source``) are checked against the tags' pings."""
+    return source in FITTED_FROM
 
 
 def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Clocks, dict[str, Any]]:

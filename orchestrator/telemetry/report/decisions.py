@@ -95,7 +95,8 @@ def _clocks(s: dict[str, Any]) -> list[dict[str, str]]:
     if source == FITTED:
         return [{"what": "clocks", "taken": f"fitted from the moving tags' pings against "
                                            f"{clocks.get('reference_receiver')}",
-                 "how": "the default where the clocks taken as logged were off (no sync tag heard by two receivers)",
+                 "how": "the default where the clocks taken as logged were off (no sync tag heard by two "
+                        "receivers: the pings left out fit the fitted ones better)",
                  "option": "the deployments' sync tags (transmitter column) or --sync DIR"}]
     why = ("the sync tags' times are too coarse to synchronise" if source == TOO_COARSE else
            "one receiver" if "one receiver" in source else "no sync tag heard by two receivers" if source == UNHEARD
