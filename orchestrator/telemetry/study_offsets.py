@@ -59,13 +59,16 @@ CLOCK_PRIOR = 1.0
 #: The σ [m] the receivers' positions are held at in the fit (the survey's: not refined here) and the σ [s] of the
 #: time base's clock (its offset 0).
 HELD_SIGMA, BASE_SIGMA = 0.01, 1e-7
-#: The prior σ [1] of the sound speed's scale fitted with the clocks where the tags' were calibrated from their
-#: pings (5 %: 75 m/s, the calibration's spread on clocks off by tens of milliseconds).
+#: The prior σ [1] of the sound speed's scale fitted with the clocks where the study gives none (5 % of
+#: :data:`~sblsim.models.tracking.sound_speed.DEFAULT_SOUND_SPEED`: 75 m/s, fresh to salt water).
 SPEED_PRIOR = 0.05
 #: The slowest sound speed [m/s] and a margin [s] of the time the sound takes across the array, the largest lag [s]
 #: between two clocks looked for, and the windows [s] of a coarse alignment (:func:`aligned`: a clock drifting by
 #: 20 ppm moves by 0.2 s in one).
 SLOWEST, CROSSING_MARGIN, MAX_LAG, WINDOW = 1400.0, 0.05, 120.0, 3 * 3600.0
+#: The most pings fitted (heard by four receivers or more; a season's spread evenly in time): 20,000 pings of 20
+#: receivers tie each clock to a few microseconds, and a fit's cost is linear in them.
+MAX_PINGS = 20_000
 #: The rounds at most of the fit (each: the study made again on the clocks fitted, and they fitted again from it).
 ROUNDS = 4
 #: The most a fitted clock's offset σ [s] may be (its median over the clock's knots) for it to be taken: a clock the
@@ -107,7 +110,8 @@ def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Cloc
     frame = frame[~frame["tag"].isin(set(table["sync_tag"]) - {""})]  # (none heard by two receivers)
     xy = table[["x", "y"]].to_numpy(float)
     crossing = float(np.linalg.norm(xy[:, None] - xy[None], axis=2).max()) / SLOWEST + CROSSING_MARGIN
-    receiver = frame["receiver"].map({n: k for k, n in enumerate(names)}).to_numpy()
+    index = frame["receiver"].map({n: k for k, n in enumerate(names)})
+    frame, receiver = frame[index.notna()], index.dropna().to_numpy(np.int64)
     if not len(frame) or len(names) < 2:
         return clocks, info
     time = frame["time"].to_numpy(float)
@@ -177,6 +181,10 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
         times.append(np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin)
     toa, times = np.vstack(parts), np.concatenate(times)
     times = np.where(np.isfinite(times), times, span[0])
+    usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread in time)
+    keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
+        if len(usable) > MAX_PINGS else usable
+    toa, times = toa[keep], times[keep]
     heard = (np.isfinite(toa).sum(axis=1) >= 4)[:, None] & np.isfinite(toa)
     base = int(np.argmax(heard.sum(axis=0))) if on is None else names.index(on.reference() or on.receivers[0])
     speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
@@ -237,11 +245,10 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
         try:
             fit = fit_clocks(outcome, deployments, span, start if fitted is None else fitted[0], sound_speed,
                              toa_sigma)
-        except ModelError as exc:
-            if fitted is None:
-                checked = {"fitted": False, "reason": str(exc)}
-            elif len(taken) > 1:  # the last round's clocks left no pings to fit: the round's before
-                fitted = taken[-2]
+        except ModelError as exc:  # none to fit from, or the last round's clocks left none: the clocks before it
+            fitted = taken[-2] if len(taken) > 1 else None
+            checked = None if fitted is not None else {"fitted": False, "reason": str(exc) if not taken else
+                                                       f"the clocks fitted left no pings to fit again ({exc})"}
             break
         held = fit.summary["held_out"]
         rounds.append({"chi2_per_dof_before": held["logged_chi2_per_dof"],
@@ -306,7 +313,8 @@ def note(summary: dict[str, Any]) -> str:
             f"round{'s' if len(rounds) > 1 else ''} (largest offset {_seconds(summary['largest_offset_s'])}, "
             f"{summary['largest_offset_receiver']}; the pings "
             f"left out fit them with chi2 per degree of freedom {rounds[-1]['chi2_per_dof_after']:.3g}, the clocks "
-            f"as logged {rounds[0]['chi2_per_dof_before']:.3g})" + (
+            f"{'aligned coarsely' if summary['as_logged'].get('coarse') else 'as logged'} "
+            f"{rounds[0]['chi2_per_dof_before']:.3g})" + (
                 f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
                 f"detections not used: {', '.join(untaken)}" if untaken else ""))
 
