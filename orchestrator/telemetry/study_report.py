@@ -64,7 +64,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                                                    else "no sync tag in the receivers file") + "): " + (
             f"the moving tags' pings left out fit them as well as clocks fitted from the others (chi2 per degree of "
             f"freedom {held['logged_chi2_per_dof']:.3g} as logged, {held['fitted_chi2_per_dof']:.3g} fitted)" if held
-            else f"not checked against the tags' pings ({checked['reason']})" if checked.get("reason") else ""))
+            else f"not checked against the tags' pings ({checked['reason']})" if checked.get("reason") else
+            "not checked against the tags' pings"))
     if "toa_noise" in s:
         out.append("  " + noise_line(s["toa_noise"]))
     if s.get("water_depth"):
