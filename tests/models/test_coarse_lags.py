@@ -55,3 +55,19 @@ def test_the_receivers_offsets_come_back_to_within_a_crossing_time():
     assert np.abs(found.offsets[:6] - (truth - truth[2])).max() < 0.15, found.offsets[:6] - (truth - truth[2])
     assert np.isnan(found.offsets[6]).all() and (found.offsets[2] == 0.0).all()
     assert found.largest_lag > 10.0 and found.pairs == 2 * 15
+
+
+def test_a_fast_tags_differences_are_bounded(monkeypatch):
+    """A tag's differences beyond :data:`MAX_DIFFERENCES` are those of every k-th detection alone: the offsets the
+    same to within the crossing time with the bound set low (a fast tag's 10⁸ differences never made)."""
+    import sblsim.models.sync.coarse_lags as coarse
+
+    rng = np.random.default_rng(8)
+    offsets = rng.uniform(-20.0, 20.0, 5)
+    receiver, tag, time = _pings(rng, 5, offsets, tags=2, span=3 * 3600.0)
+    edges = np.array([-50.0, 3 * 3600.0 + 50.0])
+    whole = coarse_offsets(receiver, tag, time, 5, edges, 120.0, 0.3, base=0)
+    monkeypatch.setattr(coarse, "MAX_DIFFERENCES", 500)
+    bounded = coarse_offsets(receiver, tag, time, 5, edges, 120.0, 0.3, base=0)
+    truth = (offsets - offsets[0])[:, None]
+    assert np.abs(whole.offsets - truth).max() < 0.15 and np.abs(bounded.offsets - truth).max() < 0.15
