@@ -279,7 +279,7 @@ def said(info: dict[str, Any]) -> list[str]:
     """The study's notes of its clocks taken as logged, checked against its tags' pings (``info``: ``study.json``'s
     ``clocks`` as :func:`fitted_study` leaves them)."""
     if info["source"] == FITTED:
-        return [info["as_logged"]["note"], note(info)]
+        return [n for n in (info["as_logged"].get("note"), note(info)) if n]
     out = [info["note"]] if info.get("note") else []
     checked, coarse = info.get("checked") or {}, info.get("coarse")
     if "reason" in checked:
