@@ -74,6 +74,9 @@ ROUNDS = 4
 #: The most a fitted clock's offset σ [s] may be (its median over the clock's knots) for it to be taken: a clock the
 #: pings tie to the time base no better is not synchronised.
 MAX_CLOCK_SIGMA = 1e-3
+#: The fewest clocks the pings must tie within :data:`MAX_CLOCK_SIGMA` for the fit to be taken (a position needs
+#: four receivers at once).
+MIN_TIED = 4
 #: The most a clock's offset σ [s] may be in a round of the fit (:func:`fitted_study`: a round's fixes on clocks
 #: still off tie them more loosely than the last's; at ±0.2 s a first round's reached 10 ms): one tied more loosely
 #: (its arrivals would split the pings it hears) is left out of the next round.
@@ -170,6 +173,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
               and row["folder"] in outcome.matrices and row["role"] != "reference" and row["motion"] == "moving"]
     if not moving:
         raise ModelError("no moving tag's pings (a reference tag is a check, never in the fit)")
+    if outcome.matrices[moving[0]].positions.shape[1] == 3:  # (fitted in the plane, the offsets take up the depths)
+        raise ModelError("the receivers' depths are given: a 3-D study's clocks are not fitted from its pings")
     names = [str(n) for n in deployments.table["receiver"]]
     receivers = deployments.table[["x", "y"]].to_numpy(float)
     column = {n: k for k, n in enumerate(names)}
@@ -186,8 +191,12 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
         if len(usable) > MAX_PINGS else usable
     toa, times = toa[keep], times[keep]
+    # the receivers these pings reach alone (a network's thousand others: not synchronised)
+    reached = np.flatnonzero(np.isfinite(toa).any(axis=0)) if len(toa) else np.arange(len(names))
+    unreached = [n for k, n in enumerate(names) if k not in set(reached.tolist())]
+    names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     heard = (np.isfinite(toa).sum(axis=1) >= 4)[:, None] & np.isfinite(toa)
-    base = int(np.argmax(heard.sum(axis=0))) if on is None else names.index(on.reference() or on.receivers[0])
+    base = int(np.argmax(heard.sum(axis=0)))  # (the clocks ``on`` put on its clock at the end)
     speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
     prior = np.full(len(names), CLOCK_PRIOR * speed)
     prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted
@@ -213,7 +222,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                                                                                        spread[kept]))
     largest = kept[int(np.argmax(np.abs(knots[kept]).max(axis=1)))]
     summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
-               "not_synchronised": [n for n, t in zip(names, taken) if not t], "tags": [
+               "not_synchronised": [n for n, t in zip(names, taken) if not t] + unreached, "tags": [
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(np.abs(knots[largest]).max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": edges.tolist(),
@@ -262,9 +271,15 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
         outcome = again(fitted, True)
     if fitted is not None:
         loose = tied(fitted[0], fitted[1]["offset_sigma_s"])
-        fitted = fitted if not loose else (_without(fitted[0], loose), fitted[1] | {
-            "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose})
-    else:  # the clocks as logged (or aligned coarsely: no fit), checked
+        if len(fitted[0].receivers) - len(loose) < MIN_TIED:  # too few pings to tie the clocks: as they were
+            checked = {"fitted": False, "reason": f"the pings tie {len(fitted[0].receivers) - len(loose)} of the "
+                                                  f"receivers' clocks within {MAX_CLOCK_SIGMA * 1e3:g} ms (fewer "
+                                                  f"than {MIN_TIED})"}
+            fitted = None
+        elif loose:
+            fitted = (_without(fitted[0], loose), fitted[1] | {
+                "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose})
+    if fitted is None:  # the clocks as logged (or aligned coarsely: no fit), checked
         fitted = (first.clocks, first.summary["clocks"] | ({"checked": checked} if checked else {}))
     shutil.rmtree(workdir / tags_folder, ignore_errors=True)
     return again(fitted, False), fitted
@@ -317,7 +332,8 @@ def note(summary: dict[str, Any]) -> str:
             f"{'aligned coarsely' if summary['as_logged'].get('coarse') else 'as logged'} "
             f"{rounds[0]['chi2_per_dof_before']:.3g})" + (
                 f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
-                f"detections not used: {', '.join(untaken)}" if untaken else ""))
+                f"detections not used: {', '.join(untaken[:12])}{', ...' if len(untaken) > 12 else ''}"
+                if untaken else ""))
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",

@@ -56,7 +56,8 @@ def opening_lines(detections: Path, s: dict[str, Any], count: int, options: dict
                    f"{c['reference_receiver']} ({c['receivers']} receivers; taken as logged, "
                    + ("no sync tag heard by two receivers" if "heard" in c["as_logged"]["source"] else
                       "no sync tag in the receivers file") + f", they were off by up to {c['largest_offset_s']:.3g} s)"
-                   + (f"; not synchronised: {', '.join(c['not_synchronised'])}" if c["not_synchronised"] else ""))
+                   + (f"; not synchronised: {len(c['not_synchronised'])} ({', '.join(c['not_synchronised'][:8])}"
+                      + (", ...)" if len(c["not_synchronised"]) > 8 else ")") if c["not_synchronised"] else ""))
     else:
         checked = c.get("checked") or {}
         held = checked.get("held_out")
