@@ -46,7 +46,7 @@ from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
 from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
-from sblsim.orchestrator.sync.clocks import Clocks
+from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
 
 #: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
@@ -279,8 +279,10 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
         elif loose:
             fitted = (_without(fitted[0], loose), fitted[1] | {
                 "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose})
-    if fitted is None:  # the clocks as logged (or aligned coarsely: no fit), checked
-        fitted = (first.clocks, first.summary["clocks"] | ({"checked": checked} if checked else {}))
+    if fitted is None:  # the clocks as logged, checked (aligned coarsely and no fit: never tracked on those)
+        clocks = first.clocks if start is None else logged_clocks([str(n) for n in deployments.table["receiver"]],
+                                                                  float(np.floor(span[0])), float(np.ceil(span[1])))
+        fitted = (clocks, first.summary["clocks"] | ({"checked": checked} if checked else {}))
     shutil.rmtree(workdir / tags_folder, ignore_errors=True)
     return again(fitted, False), fitted
 
@@ -299,11 +301,11 @@ def said(info: dict[str, Any]) -> list[str]:
     checked, coarse = info.get("checked") or {}, info.get("coarse")
     if "reason" in checked:
         out.append(f"the clocks taken as logged are not checked against the tags' pings: {checked['reason']}")
-    if coarse:  # aligned coarsely, not fitted: no σ holds what is left
+    if coarse:  # aligned coarsely, not fitted: taken as logged (a ping's arrivals split), never on those
         out.append(f"the receivers' clocks as logged disagree by up to {coarse['largest_lag_s']:.3g} s (their "
-                   f"detections of the same tags) and are aligned from those only, to within the time the sound takes "
-                   f"across the array ({coarse['crossing_s']:.2g} s): every position is off by up to "
-                   f"{coarse['crossing_s'] * SLOWEST:.0f} m beyond its sigma")
+                   f"detections of the same tags), and no fit from the moving tags' pings ties them: the tags are "
+                   f"positioned on the clocks as logged, whose offsets split a ping's arrivals; give the raw "
+                   f"detections with the sync tags' or --sync DIR")
     return out
 
 
