@@ -48,6 +48,7 @@ from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
+from sblsim.orchestrator.telemetry.study_positions import pooled
 
 #: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
 #: receivers), and the source of clocks so fitted.
@@ -178,14 +179,9 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     names = [str(n) for n in deployments.table["receiver"]]
     receivers = deployments.table[["x", "y"]].to_numpy(float)
     column = {n: k for k, n in enumerate(names)}
-    parts, times = [], []
-    for folder in moving:  # each tag's pings on its own origin (every ping has its own emission time)
-        matrix = outcome.matrices[folder]
-        toa = np.full((len(matrix.toa), len(names)), np.nan)
-        toa[:, [column[n] for n in matrix.names]] = matrix.toa
-        parts.append(toa)
-        times.append(np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin)
-    toa, times = np.vstack(parts), np.concatenate(times)
+    # each tag's pings on its own origin (every ping has its own emission time)
+    parts = [pooled(outcome.matrices[folder], column) for folder in moving]
+    toa, times = np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     times = np.where(np.isfinite(times), times, span[0])
     usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread in time)
     keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
@@ -193,10 +189,10 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     toa, times = toa[keep], times[keep]
     # the receivers these pings reach alone (a network's thousand others: not synchronised)
     reached = np.flatnonzero(np.isfinite(toa).any(axis=0)) if len(toa) else np.arange(len(names))
-    unreached = [n for k, n in enumerate(names) if k not in set(reached.tolist())]
+    unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
-    heard = (np.isfinite(toa).sum(axis=1) >= 4)[:, None] & np.isfinite(toa)
-    base = int(np.argmax(heard.sum(axis=0)))  # (the clocks ``on`` put on its clock at the end)
+    # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
+    base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
     speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
     prior = np.full(len(names), CLOCK_PRIOR * speed)
     prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted

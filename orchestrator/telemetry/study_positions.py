@@ -90,6 +90,15 @@ class StudyRefinement:
         return replace(deployments, table=table), replace(assigned, hydrophones=hydrophones)
 
 
+def pooled(matrix, column: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """A tag's times-of-arrival matrix over the study's receivers (``column``: each name's column): its times of
+    arrival (P, R) [s] on its own origin (NaN where not heard) and each ping's time (P,) [s since 1970 UTC] (its first
+    arrival's; inf where none)."""
+    toa = np.full((len(matrix.toa), len(column)), np.nan)
+    toa[:, [column[n] for n in matrix.names]] = matrix.toa
+    return toa, np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin
+
+
 def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str], names: list[str]):
     """The moving tags' pings pooled over the study's receivers: times of arrival (P, R) [s] (each tag's on its own
     origin: every ping has its own emission time), each ping's place on its track (P, dim) [m] (NaN where the
@@ -100,9 +109,8 @@ def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str
     sigma = np.full(len(names), np.nan)
     for folder in folders:
         matrix, outcome = matrices[folder], outcomes[folder]
-        toa = np.full((len(matrix.toa), len(names)), np.nan)
+        toa, first = pooled(matrix, column)
         at = [column[n] for n in matrix.names]
-        toa[:, at] = matrix.toa
         dim = matrix.positions.shape[1]
         estimates = outcome.estimates
         main = estimates[estimates["estimator"] == outcome.summary["track"]].dropna(subset=["x", "y"])
@@ -114,7 +122,7 @@ def _pings(outcomes: dict[str, Any], matrices: dict[str, Any], folders: list[str
             len(matrix.names), float(np.median(np.atleast_1d(outcome.summary["sigma_toa_s"]))))
         sigma[at] = np.where(np.isfinite(sigma[at]), sigma[at], noise)
         parts.append(toa)
-        times.append(np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1) + matrix.origin)
+        times.append(first)
         places.append(place)
         speeds.append(np.full(len(toa), float(outcome.summary["sound_speed"]["sound_speed_m_s"])))
         used.append(matrix.summary["tag"])
@@ -400,4 +408,4 @@ def lines(summary: dict[str, Any] | None) -> list[tuple[str, bool]]:
 
 
 __all__ = ["REFINED_FOLDER", "ROUNDS", "ROUND_TOLERANCE", "SPEED_SIGMA", "StudyRefinement", "WORSE_TOLERANCE", "lines",
-           "position_sigmas", "refine_study", "refined_study", "sync_pings", "verdict"]
+           "pooled", "position_sigmas", "refine_study", "refined_study", "sync_pings", "verdict"]
