@@ -24,14 +24,22 @@ import numpy as np
 
 from sblsim.models.declarations import ModelError
 
-#: The quanta looked for, coarsest first [s].
-QUANTA = (60.0, 10.0, 1.0, 0.1, 0.01, 0.001)
+#: The quanta looked for, coarsest first [s]: the decimal steps of 1, 2 and 5 (and quarters) from a minute to a
+#: millisecond, each a whole number of milliseconds. Not a chain (0.05 s is no multiple of 0.02 s): batches' quanta
+#: combine by their greatest common divisor (:func:`common_quantum`). A grid the decimal steps alone would miss (times
+#: floored to 0.05 s taken as hundredths) gives its rounding σ five times too small.
+QUANTA = (60.0, 30.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.25, 0.2, 0.1, 0.05, 0.025, 0.02, 0.01, 0.005, 0.002, 0.001)
+#: The first times each quantum is tried on before all of them.
+SCREEN = 1000
 #: The share of the largest travel time across the array a rounding's σ must stay below (:func:`check_resolution`,
 #: :func:`resolution_warning`).
 RESOLVABLE = 0.1
 #: How the quanta are named in a line.
-QUANTUM_NAMES = {60.0: "whole minutes", 10.0: "tens of seconds", 1.0: "whole seconds", 0.1: "tenths of a second",
-                 0.01: "hundredths of a second", 0.001: "milliseconds"}
+QUANTUM_NAMES = {60.0: "whole minutes", 30.0: "half minutes", 10.0: "tens of seconds", 5.0: "fives of seconds",
+                 2.0: "even seconds", 1.0: "whole seconds", 0.5: "half seconds", 0.25: "quarter seconds",
+                 0.2: "fifths of a second", 0.1: "tenths of a second", 0.05: "twentieths of a second",
+                 0.025: "fortieths of a second", 0.02: "fiftieths of a second", 0.01: "hundredths of a second",
+                 0.005: "two-hundredths of a second", 0.002: "five-hundredths of a second", 0.001: "milliseconds"}
 
 
 def rounding_sigma(quantum: float) -> float:
@@ -60,11 +68,23 @@ def time_quantum(times: np.ndarray) -> float:
     t = t[np.isfinite(t)]
     if len(t) < 2:
         return 0.0
+    tolerance = max(1e-6, 4 * float(np.spacing(np.abs(t).max())))
+    head = t[:SCREEN]  # (a quantum the first times refuse is not tried on a season's)
     for q in QUANTA:
-        remainder = np.abs(t / q - np.round(t / q)) * q
-        if (remainder <= max(1e-6, 4 * np.spacing(np.abs(t).max()))).all():
+        if all((np.abs(part / q - np.round(part / q)) * q <= tolerance).all() for part in (head, t)):
             return q
     return 0.0
+
+
+def common_quantum(quanta) -> float:
+    """[s] the rounding of batches' times together: the coarsest of :data:`QUANTA` dividing each batch's quantum
+    (their greatest common divisor: 0.05 s and 0.02 s give 0.01 s), 0 where any is 0 (finer than a millisecond) or
+    none is given."""
+    ms = [int(round(float(q) * 1000)) for q in quanta]
+    if not ms or min(ms) <= 0:
+        return 0.0
+    common = int(np.gcd.reduce(ms))
+    return next(q for q in QUANTA if common % int(round(q * 1000)) == 0)
 
 
 def resolution_warning(times: np.ndarray | None, travel_time: float, sound_speed: float, what: str,
@@ -82,8 +102,8 @@ def resolution_warning(times: np.ndarray | None, travel_time: float, sound_speed
     what : str
         The source named in the line (a file).
     quantum : float, optional
-        [s] the times' rounding where known already (the finest of batches' :func:`time_quantum`: each of
-        :data:`QUANTA` a whole multiple of the next).
+        [s] the times' rounding where known already (batches' :func:`time_quantum` together:
+        :func:`common_quantum`).
 
     Returns
     -------
@@ -192,5 +212,6 @@ def residual_warning(quanta: np.ndarray, residuals: np.ndarray, receivers: list[
             "position from them; export the detections with their sub-second times")
 
 
-__all__ = ["QUANTA", "QUANTUM_NAMES", "RESOLVABLE", "RoundingError", "check_resolution", "resolution_warning",
+__all__ = ["QUANTA", "QUANTUM_NAMES", "RESOLVABLE", "RoundingError", "check_resolution", "common_quantum",
+           "resolution_warning",
            "residual_warning", "rounding_sigma", "time_quantum"]

@@ -23,7 +23,7 @@ from typing import Iterator, Sequence
 import numpy as np
 import pandas as pd
 
-from sblsim.models.sync.resolution import time_quantum
+from sblsim.models.sync.resolution import common_quantum, time_quantum
 from sblsim.orchestrator.io.memory import release
 from sblsim.orchestrator.readers.assign import SET_ASIDE, Assigned, assign, nothing_kept
 from sblsim.orchestrator.readers.deployments import Deployments
@@ -113,7 +113,7 @@ class Tally:
                    pd.concat([p.kept for p in parts]).groupby(level=0, sort=False).sum(),
                    (min(p.span[0] for p in parts), max(p.span[1] for p in parts)),
                    pd.unique(np.concatenate([p.serials for p in parts])), daily,
-                   float(min(quanta)) if quanta else 0.0, tags, set().union(*(p.labelled for p in parts)),
+                   common_quantum(quanta), tags, set().union(*(p.labelled for p in parts)),
                    {k: v for p in parts for k, v in p.stored_as.items()})
 
 

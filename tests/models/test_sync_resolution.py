@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.models.sync.resolution import QUANTA, resolution_warning, time_quantum
+from sblsim.models.sync.resolution import QUANTA, common_quantum, resolution_warning, time_quantum
 
 
 @pytest.mark.parametrize("q", QUANTA)
@@ -15,6 +15,21 @@ def test_times_rounded_to_a_quantum_give_that_quantum(q):
     raw = 1.7e9 + np.sort(rng.uniform(0, 86400 * 3, 500))
     assert time_quantum(np.round(raw / q) * q) == q
     assert time_quantum(raw) == 0.0
+
+
+def test_batches_rounded_apart_combine_as_their_times_together():
+    """Two batches of times on two grids (0.05 s and 0.02 s: neither a multiple of the other), each batch's quantum
+    found alone, combine (:func:`common_quantum`) to the quantum of all their times found at once, for every pair of
+    :data:`QUANTA`; a batch finer than a millisecond makes the whole so."""
+    rng = np.random.default_rng(3)
+    raw = 1.7e9 + np.sort(rng.uniform(0, 86400, 600))
+    for a in QUANTA:
+        for b in QUANTA:
+            first, second = np.round(raw[:300] / a) * a, np.round(raw[300:] / b) * b
+            alone = [time_quantum(first), time_quantum(second)]
+            assert alone == [a, b]
+            assert common_quantum(alone) == time_quantum(np.r_[first, second]), (a, b)
+    assert common_quantum([0.05, 0.02]) == 0.01 and common_quantum([0.05, 0.0]) == 0.0 and common_quantum([]) == 0.0
 
 
 def test_the_warning_weighs_the_rounding_against_the_travel_time():
