@@ -101,8 +101,9 @@ class ToaOutcome:
 
 
 #: The fewest of a tag's times at a receiver whose own rounding is taken (:func:`build_toa`'s ``rounding``; fewer:
-#: the rounding of the tag's times at every receiver): ten times on a step's grid by chance, 10⁻¹⁰ for a decimal one.
-FEW_TIMES = 10
+#: the rounding of the tag's times at every receiver): thirty times on a grid twice the step by chance (even
+#: milliseconds, :data:`~sblsim.models.sync.resolution.QUANTA`' closest pair), 10⁻⁹.
+FEW_TIMES = 30
 
 
 def tags_present(detections: Detections, limit: int = 8) -> str:
