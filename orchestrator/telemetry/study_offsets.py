@@ -13,7 +13,7 @@ So, the tags' matrices made and none tracked:
    :mod:`~sblsim.models.sync.coarse_lags`), to within that time;
 2. each receiver's offset from the clocks the matrices were made on, linear in time between knots (the study's first
    and last detection, or the coarse alignment's windows), is fitted with the moving tags' pings' places and emission
-   times, each ping from its own fix (:func:`fit_clocks`;
+   times, each ping from its own fix (in 3-D at the depth its tracker takes: :func:`held_heights`) (:func:`fit_clocks`;
    :func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias with a broad prior,
    the positions held at the survey's, a ping heard by four receivers or more, the sound speed's scale fitted with
    them where none is given), one receiver's clock the time base (an offset common to every clock moves no
@@ -42,6 +42,8 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
+from sblsim.models.tracking.depth import plane_prior
+from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
 from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
@@ -49,6 +51,8 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
 from sblsim.orchestrator.telemetry.study_positions import pooled
+from sblsim.orchestrator.tracks.depth import bottom_water_depth, undetermined_depth
+from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
 
 #: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
 #: receivers), and the source of clocks so fitted.
@@ -148,7 +152,9 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     outcome : StudyOutcome
         The study made on the clocks ``on`` (its moving tags' matrices: each ping starts from its own fix).
     deployments : Deployments
-        Its deployments (the receivers' surveyed positions; in the horizontal plane).
+        Its deployments (the receivers' surveyed positions, fitted in the horizontal plane: in 3-D each ping held at
+        its tracker's depth, :func:`held_heights`; their ``bottom_depth`` bounding it where ``study.json``'s
+        ``water_depth`` takes them).
     span : tuple of float
         [s since 1970 UTC] the study's first and last detection: the clocks' two knots (an offset and a drift).
     on : Clocks, optional
@@ -174,33 +180,37 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
               and row["folder"] in outcome.matrices and row["role"] != "reference" and row["motion"] == "moving"]
     if not moving:
         raise ModelError("no moving tag's pings (a reference tag is a check, never in the fit)")
-    if outcome.matrices[moving[0]].positions.shape[1] == 3:  # (fitted in the plane, the offsets take up the depths)
-        raise ModelError("the receivers' depths are given: a 3-D study's clocks are not fitted from its pings")
+    dim = outcome.matrices[moving[0]].positions.shape[1]
     names = [str(n) for n in deployments.table["receiver"]]
-    receivers = deployments.table[["x", "y"]].to_numpy(float)
+    receivers = deployments.table[["x", "y", "z"][:dim]].to_numpy(float)
     column = {n: k for k, n in enumerate(names)}
-    # each tag's pings on its own origin (every ping has its own emission time)
+    speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
+    sigma = SIGMA_TOA if toa_sigma is None else toa_sigma
+    # each tag's pings on its own origin (every ping has its own emission time); in 3-D at the depth its tracker
+    # takes (the fit is in the horizontal plane: each ping's depth held)
     parts = [pooled(outcome.matrices[folder], column) for folder in moving]
     toa, times = np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     times = np.where(np.isfinite(times), times, span[0])
+    heights = None if dim == 2 else np.concatenate([held_heights(outcome.matrices[f], deployments, outcome.summary.get(
+        "water_depth"), speed, sigma) for f in moving])
     usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread in time)
     keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
         if len(usable) > MAX_PINGS else usable
-    toa, times = toa[keep], times[keep]
+    toa, times, heights = toa[keep], times[keep], None if heights is None else heights[keep]
     # the receivers these pings reach alone (a network's thousand others: not synchronised)
     reached = np.flatnonzero(np.isfinite(toa).any(axis=0)) if len(toa) else np.arange(len(names))
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
     base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
-    speed = DEFAULT_SOUND_SPEED if sound_speed is None else float(sound_speed)
     prior = np.full(len(names), CLOCK_PRIOR * speed)
     prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted
     edges = np.array([span[0], max(span[1], span[0] + 1.0)]) if on is None else on.edges
     kwargs = {"biases": True, "times": times, "edges": edges, "rescale": True, "bias_sigma": prior,
               "speed_sigma": SPEED_PRIOR if sound_speed is None else None}
-    places = np.full((len(toa), 2), np.nan)  # each ping from its own fix
-    sigma = SIGMA_TOA if toa_sigma is None else toa_sigma
+    places = np.full((len(toa), dim), np.nan)  # each ping from its own fix (at its depth in 3-D)
+    if heights is not None:
+        places[:, 2] = heights
     fit = refine_receivers(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs)  # refused in one line
     check = held_out(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs, clocks=True)
     fitted = speed * fit.speed_scale  # [m/s] (the speed given where not fitted)
@@ -231,6 +241,43 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                                     f"most blocks"},
                "converged": fit.converged}
     return ClockFit(clocks, summary, check.helps)
+
+
+def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float) -> np.ndarray:
+    """(P,) [m, z up] the height each of a tag's pings is held at in a 3-D study's clock fit: its depth sensor's
+    reading (``pings.csv``'s ``depth_m``) where it has one, else its own fix's with the prior its tracker takes
+    (:mod:`~sblsim.orchestrator.tracks.depth`: receivers in one plane hold it at mid-water, or at their mean depth;
+    a depth the arrivals do not determine, at the receivers' mean; the water's depth, ``study.json``'s
+    ``water_depth`` (``water``: given, or the deepest bottom of the receivers that heard the tag), and the surface
+    bounding it), else the prior's (a fix with no arrival to spare, or none: the receivers' mean where no prior is
+    taken). ``matrix`` the tag's (its ``positions`` (R, 3) [m]), at the sound speed ``c`` [m/s] and a
+    timing noise ``sigma`` [s]."""
+    water = water or {}
+    deepest = water.get("water_depth_m") if water.get("source") == "given" else bottom_water_depth(
+        deployments.table.set_index("receiver")["bottom_depth"].reindex(matrix.names).to_numpy(float),
+        np.isfinite(matrix.toa).any(axis=0)) if water.get("source") == "bottom_depth" else None
+    positions = np.asarray(matrix.positions, float)
+    prior = plane_prior(positions, deepest, DEPTH_SIGMA)  # (at least a depth reading's σ, as the tracker's)
+    rows = len(matrix.toa)
+    fixed = _fix(matrix.toa, positions, c, sigma, prior)
+    if prior is None:  # the arrivals' depth, where they determine it (else the receivers' mean), in the water
+        fx, _, fc, used, _ = fixed
+        prior = undetermined_depth(None, fx, fc, used.sum(axis=1), positions, deepest)
+        fixed = fixed if prior is None else _fix(matrix.toa, positions, c, sigma, prior)
+    fallback = -prior.depth if prior is not None else float(positions[:, 2].mean())
+    # a fix with no arrival to spare (four, its depth free) says nothing of its depth: the prior's, or the receivers'
+    told = np.isfinite(fixed[0][:, 2]) & (fixed[3].sum(axis=1) >= (4 if prior is not None else 5))
+    height = np.clip(np.where(told, fixed[0][:, 2], fallback), -np.inf if deepest is None else -deepest, 0.0)
+    readings = matrix.pings["depth_m"].to_numpy(float) if "depth_m" in matrix.pings and len(matrix.pings) == rows \
+        else np.full(rows, np.nan)
+    return np.where(np.isfinite(readings), -readings, height)
+
+
+def _fix(toa, positions, c, sigma, prior):
+    """Each ping's fix (no gate: the clocks may be off), its depth with ``prior`` where one is taken."""
+    depth = None if prior is None else np.full(len(toa), prior.depth)
+    return fix_pings(toa, positions, c, sigma, gate=np.inf, depth=depth,
+                     depth_sigma=DEPTH_SIGMA if prior is None else prior.sigma)
 
 
 def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployments, span: tuple[float, float],
@@ -335,4 +382,4 @@ def note(summary: dict[str, Any]) -> str:
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "note", "said"]
+           "fitted_study", "held_heights", "note", "said"]

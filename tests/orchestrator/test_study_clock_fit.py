@@ -17,19 +17,23 @@ from sblsim.orchestrator.telemetry.simulate import simulate_study
 DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
 
-def _study(tmp_path, offset: float, drift: float, unheard: bool):
+def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False):
     """A simulated GLATOS study (9 receivers, 3 animals, 6 hours) whose sync tags are never heard (``unheard``: their
-    rows dropped from the detections) or never named (the deployments' ``transmitter`` emptied), run through the
-    CLI; the simulation, the study's folder and its ``study.json``."""
+    rows dropped from the detections) or never named (the deployments' ``transmitter`` emptied), with ``depths``
+    its deployments' ``instrument_depth`` (5 m: the tags' too, the simulation being in one plane) and
+    ``bottom_depth`` (20 to 36 m), run through the CLI; the simulation, the study's folder and its ``study.json``."""
     from sblsim.orchestrator import cli
 
     sim = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=0, seed=5, offset=offset, drift=drift)
     if unheard:
         sim.detections = sim.detections[~sim.detections["transmitter"].isin(sim.deployments["transmitter"])]
     files = sim.write(tmp_path / "in", "glatos")
+    sheet = pd.read_csv(files["deployments"], dtype=str, keep_default_na=False)
     if not unheard:
-        sheet = pd.read_csv(files["deployments"], dtype=str, keep_default_na=False)
-        sheet.assign(transmitter="").to_csv(files["deployments"], index=False)
+        sheet = sheet.assign(transmitter="")
+    if depths:
+        sheet = sheet.assign(instrument_depth=5.0, bottom_depth=20.0 + 2.0 * np.arange(len(sheet)))
+    sheet.to_csv(files["deployments"], index=False)
     out = tmp_path / "study"
     assert cli.main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
                      str(files["tags"]), "--out", str(out)]) == 0
@@ -118,6 +122,25 @@ def test_clocks_off_by_seconds_are_aligned_from_the_tags_detections_then_fitted(
         assert rows["error"].median() < 0.5 and 1.0 <= rows["nees"].mean() <= 4.0, (tag, rows.describe())
 
 
+def test_a_3d_study_s_clocks_are_fitted_with_each_ping_at_its_tracker_s_depth(tmp_path):
+    """The deployments give each receiver's depth (``instrument_depth`` 5 m) and the bottom's (20 to 36 m), as a
+    GLATOS or OTN sheet does: a 3-D study, whose clocks were not fitted (fitted in the plane, the offsets took up the
+    depths) and whose fixes on clocks off by ±30 ms were 27 to 34 m off with NEES in the thousands. Each ping is now
+    held at the depth its tracker takes (its own fix with the prior, mid-water here: 10 m from the truth, which the
+    arrivals pull it back from): each clock's offset within 0.3 ms of the simulated one at every knot, every
+    animal's median error below 0.5 m and its NEES (2-D) in [1, 4]."""
+    from sblsim.orchestrator.telemetry.study_offsets import FITTED
+
+    sim, out, study = _study(tmp_path, 0.03, 5e-6, unheard=False, depths=True)
+    clocks = study["clocks"]
+    assert study["water_depth"]["source"] == "bottom_depth"
+    assert clocks["source"] == FITTED and clocks["receivers"] == 9, clocks
+    _offsets_agree(sim, clocks, 3e-4)
+    errors = _errors(sim, out, clocks["reference_receiver"])
+    for tag, rows in errors.groupby("tag"):
+        assert rows["error"].median() < 0.5 and 1.0 <= rows["nees"].mean() <= 4.0, (tag, rows.describe())
+
+
 @pytest.mark.slow
 def test_the_boats_clocks_without_their_sync_tags_come_from_the_animals_pings(tmp_path):
     """The boats' raw detections (data/boats-norway) less every sync tag's row: the receivers' clocks, off by up to
@@ -148,3 +171,40 @@ def test_the_boats_clocks_without_their_sync_tags_come_from_the_animals_pings(tm
         nees = dx**2 / (both["sigma_x"] ** 2 + both["sigma_x_s"] ** 2) + dy**2 / (both["sigma_y"] ** 2
                                                                                  + both["sigma_y_s"] ** 2)
         assert len(both) > 200 and np.hypot(dx, dy).median() < 5.0 and nees.mean() < 5.0, (tag, len(both))
+
+
+def test_each_ping_s_depth_held_in_a_3d_fit_is_the_one_its_tracker_would_take():
+    """:func:`held_heights` on pings simulated here (a tag at 10 m among receivers at 5 and 40 m, 0.1 ms of noise, a
+    fifth of the arrivals missing): where the receivers' depths span enough to determine the tag's, each ping's
+    own fix's depth (median within 1 m of the truth, where the receivers' mean is 12.5 m off); a depth sensor's
+    reading where a ping has one; receivers in one plane with no water depth, their own depth (the tracker's prior);
+    with the water's depth given, within the column."""
+    from types import SimpleNamespace
+
+    from sblsim.orchestrator.telemetry.study_offsets import held_heights
+
+    rng = np.random.default_rng(4)
+    xy = np.array([[0, 0], [400, 0], [400, 400], [0, 400], [200, -50], [450, 200], [200, 450], [-50, 200]], float)
+    deep = np.c_[xy, np.repeat([-5.0, -40.0], 4)]
+    places = np.c_[rng.uniform(50, 350, (300, 2)), np.full(300, -10.0)]
+    names = [f"r{k}" for k in range(len(xy))]
+    deployments = SimpleNamespace(table=pd.DataFrame({"receiver": names, "bottom_depth": 45.0}))
+
+    def matrix(receivers, pings=None):
+        toa = 100.0 + 5.0 * np.arange(len(places))[:, None] + np.linalg.norm(
+            places[:, None] - receivers[None], axis=2) / 1480.0 + 1e-4 * rng.normal(size=(len(places), len(xy)))
+        toa[rng.uniform(size=toa.shape) < 0.2] = np.nan
+        return SimpleNamespace(toa=toa, positions=receivers, names=names,
+                               pings=pd.DataFrame(index=range(len(places))) if pings is None else pings)
+
+    for water in (None, {"source": "bottom_depth"}):
+        held = held_heights(matrix(deep), deployments, water, 1480.0, 1e-4)
+        assert np.median(np.abs(held + 10.0)) < 1.0 and np.abs(np.median(held) - deep[:, 2].mean()) > 8.0, water
+        assert held.min() >= -45.0 if water else (held <= 0.0).all()
+    readings = np.where(np.arange(len(places)) % 2, 12.0, np.nan)
+    held = held_heights(matrix(deep, pd.DataFrame({"depth_m": readings})), deployments, None, 1480.0, 1e-4)
+    assert (held[1::2] == -12.0).all() and np.median(np.abs(held[::2] + 10.0)) < 1.0
+    flat = np.c_[xy, np.full(len(xy), -5.0)]
+    assert (held_heights(matrix(flat), deployments, None, 1480.0, 1e-4) == -5.0).all()
+    held = held_heights(matrix(flat), deployments, {"source": "given", "water_depth_m": 30.0}, 1480.0, 1e-4)
+    assert ((held >= -30.0) & (held <= 0.0)).all()
