@@ -179,7 +179,11 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     moving = [row["folder"] for row in outcome.tags.to_dict("records") if isinstance(row["folder"], str)
               and row["folder"] in outcome.matrices and row["role"] != "reference" and row["motion"] == "moving"]
     if not moving:
-        raise ModelError("no moving tag's pings (a reference tag is a check, never in the fit)")
+        animals = outcome.tags[(outcome.tags["role"] != "reference") & (outcome.tags["motion"] == "moving")]
+        codes = animals["reason_code"].fillna("").astype(str).value_counts()
+        raise ModelError("no moving tag's pings to fit from, " + (
+            "every moving tag refused (" + ", ".join(f"{c} {n}" for c, n in codes.items() if c) + ")" if len(animals)
+            else "only reference tags (a check, never in the fit)"))
     dim = outcome.matrices[moving[0]].positions.shape[1]
     names = [str(n) for n in deployments.table["receiver"]]
     receivers = deployments.table[["x", "y", "z"][:dim]].to_numpy(float)
@@ -327,7 +331,24 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
                                                                   float(np.floor(span[0])), float(np.ceil(span[1])))
         fitted = (clocks, first.summary["clocks"] | ({"checked": checked} if checked else {}))
     shutil.rmtree(workdir / tags_folder, ignore_errors=True)
-    return again(fitted, False), fitted
+    study = again(fitted, False)
+    if fitted[1].get("coarse") and fitted[1]["source"] != FITTED:  # the clocks as logged split its pings
+        split_reasons(study.tags, fitted[1]["coarse"]["largest_lag_s"])
+    return study, fitted
+
+
+#: The reasons a tag is refused that clocks seconds apart make (a ping's arrivals split, its steps false).
+SPLIT_CODES = ("too_few_receivers_at_once", "interval_contradicted", "interval_unknown", "no_position")
+
+
+def split_reasons(tags: pd.DataFrame, lag: float) -> None:
+    """``tags.csv``'s refused rows whose reason (:data:`SPLIT_CODES`) clocks disagreeing by up to ``lag`` [s] make,
+    positioned on the clocks as logged (no fit tied them): each reason names those clocks as its cause, in place."""
+    rows = (tags["status"] == "refused") & tags["reason_code"].isin(SPLIT_CODES)
+    tags.loc[rows, "reason"] = tags.loc[rows, "reason"].astype(str) + (
+        f"; the receivers' clocks as logged disagree by up to {_seconds(lag)} (their detections of the same tags) "
+        f"and no fit from the moving tags' pings ties them: they split a ping's arrivals; allowed: the raw "
+        f"detections with the sync tags' or --sync DIR")
 
 
 def _seconds(value: float) -> str:
@@ -382,4 +403,4 @@ def note(summary: dict[str, Any]) -> str:
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "held_heights", "note", "said"]
+           "fitted_study", "held_heights", "note", "said", "split_reasons"]

@@ -17,14 +17,15 @@ from sblsim.orchestrator.telemetry.simulate import simulate_study
 DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
 
-def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False):
-    """A simulated GLATOS study (9 receivers, 3 animals, 6 hours) whose sync tags are never heard (``unheard``: their
+def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False, receivers: int = 9):
+    """A simulated GLATOS study (``receivers``, 3 animals, 6 hours) whose sync tags are never heard (``unheard``: their
     rows dropped from the detections) or never named (the deployments' ``transmitter`` emptied), with ``depths``
     its deployments' ``instrument_depth`` (5 m: the tags' too, the simulation being in one plane) and
     ``bottom_depth`` (20 to 36 m), run through the CLI; the simulation, the study's folder and its ``study.json``."""
     from sblsim.orchestrator import cli
 
-    sim = simulate_study(n_receivers=9, n_tags=3, days=0.25, redeployed=0, seed=5, offset=offset, drift=drift)
+    sim = simulate_study(n_receivers=receivers, n_tags=3, days=0.25, redeployed=0, seed=5, offset=offset,
+                         drift=drift)
     if unheard:
         sim.detections = sim.detections[~sim.detections["transmitter"].isin(sim.deployments["transmitter"])]
     files = sim.write(tmp_path / "in", "glatos")
@@ -139,6 +140,28 @@ def test_a_3d_study_s_clocks_are_fitted_with_each_ping_at_its_tracker_s_depth(tm
     errors = _errors(sim, out, clocks["reference_receiver"])
     for tag, rows in errors.groupby("tag"):
         assert rows["error"].median() < 0.5 and 1.0 <= rows["nees"].mean() <= 4.0, (tag, rows.describe())
+
+
+def test_clocks_seconds_apart_that_no_fit_ties_are_named_in_each_refused_tag_s_reason(tmp_path, capsys):
+    """Three receivers (no ping heard by the four a fit needs) whose clocks are off by up to ±2 s: the tags are
+    positioned on the clocks as logged, which split every ping's arrivals, and refused; each refused row's reason
+    names the clocks (by how much they disagree, that no fit ties them) beside its counts, and the study says why no
+    fit was made (every moving tag refused, by code). With the clocks right no reason names them."""
+    from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG
+
+    _, out, study = _study(tmp_path / "off", 2.0, 2e-5, unheard=False, receivers=3)
+    lag = study["clocks"]["coarse"]["largest_lag_s"]
+    assert study["clocks"]["source"] == NO_SYNC_TAG and lag > 1.0, study["clocks"]
+    assert study["clocks"]["checked"]["reason"] == ("no moving tag's pings to fit from, every moving tag refused "
+                                                    "(too_few_receivers_at_once 3)")
+    tags = pd.read_csv(out / "tags.csv")
+    assert (tags["status"] == "refused").all() and (tags["reason_code"] == "too_few_receivers_at_once").all()
+    named = f"the receivers' clocks as logged disagree by up to {lag:.3g} s"
+    assert all(r.startswith("0 of ") and named in r for r in tags["reason"]), tags["reason"].tolist()
+    assert named in capsys.readouterr().err
+    _, out, study = _study(tmp_path / "right", 0.0, 0.0, unheard=False, receivers=3)
+    assert "coarse" not in study["clocks"]
+    assert not pd.read_csv(out / "tags.csv")["reason"].fillna("").str.contains("disagree").any()
 
 
 @pytest.mark.slow
