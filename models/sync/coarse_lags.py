@@ -90,7 +90,9 @@ def coarse_offsets(receiver: np.ndarray, tag: np.ndarray, time: np.ndarray, rece
     crossing : float
         [s] the time the sound takes across the array (a pair's stretch's width).
     base : int
-        The time base's receiver (its offset 0).
+        The time base's receiver (its offset 0; in a window whose pairs it is in none of, the receiver of the most
+        pairs' detections there: a redeployed array's, no deployment spanning the season. An offset common to every
+        clock moves no position, and a receiver's offsets outside its own deployment are never read).
 
     Returns
     -------
@@ -132,7 +134,10 @@ def coarse_offsets(receiver: np.ndarray, tag: np.ndarray, time: np.ndarray, rece
             continue
         taken += len(rows)
         largest = max(largest, float(np.abs(lag).max()))
-        offsets[:, w] = _solve(np.array(rows), np.array(weights, float), np.array(lag), receivers, base)
+        pairs, weights = np.array(rows), np.array(weights, float)
+        here_base = base if (pairs == base).any() else int(np.argmax(np.bincount(  # (the base not deployed here)
+            pairs.ravel(), weights=np.repeat(weights, 2), minlength=receivers)))
+        offsets[:, w] = _solve(pairs, weights, np.array(lag), receivers, here_base)
     centres = 0.5 * (edges[:-1] + edges[1:])
     return CoarseLags(offsets, centres, taken, largest)
 

@@ -216,9 +216,10 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
         a timing noise taken from a synchronisation made on wrong positions took up their error (each receiver's
         as its clock's), and would weigh the receivers the refinement is to move as if they were noisy.
     bias_sigma : float or numpy.ndarray, optional
-        [m] with ``biases``, the range biases' prior σ, one or (R,) per receiver (each of its knots'): clocks taken
-        as logged, their offsets fitted from the pings (:mod:`~sblsim.orchestrator.telemetry.study_offsets`: a
-        broad prior, one receiver's tiny, its clock the time base). None: ``survey_sigma``, as the shifts'.
+        [m] with ``biases``, the range biases' prior σ, one, (R,) per receiver (each of its knots') or (R, K + 1)
+        per receiver and knot: clocks taken as logged, their offsets fitted from the pings
+        (:mod:`~sblsim.orchestrator.telemetry.study_offsets`: a broad prior, one receiver's tiny at each knot, its
+        clock the time base there). None: ``survey_sigma``, as the shifts'.
 
     Returns
     -------
@@ -305,8 +306,8 @@ def refine_receivers(toa: np.ndarray, receivers: np.ndarray, places: np.ndarray,
 
 
 def _prior_sigmas(layout: Unknowns, survey_sigma: float, bias_sigma) -> np.ndarray:
-    """(band + 2R,) [m] the prior σ of the range biases' knots (``bias_sigma``: one, or (R,) per receiver; None:
-    ``survey_sigma``) and of the shifts (``survey_sigma``).
+    """(band + 2R,) [m] the prior σ of the range biases' knots (``bias_sigma``: one, (R,) per receiver or (R, K + 1)
+    per receiver and knot; None: ``survey_sigma``) and of the shifts (``survey_sigma``).
 
     Raises
     ------
@@ -316,12 +317,14 @@ def _prior_sigmas(layout: Unknowns, survey_sigma: float, bias_sigma) -> np.ndarr
     shifts = np.full(2 * layout.receivers, survey_sigma)
     if bias_sigma is None:
         return np.r_[np.full(layout.band, survey_sigma), shifts]
-    each = np.broadcast_to(np.asarray(bias_sigma, float), (layout.receivers,)) if np.ndim(bias_sigma) == 0 or \
-        np.shape(bias_sigma) == (layout.receivers,) else None
+    shape = np.shape(bias_sigma)
+    each = np.broadcast_to(np.asarray(bias_sigma, float), (layout.knots, layout.receivers)) if shape in (
+        (), (layout.receivers,)) else np.asarray(bias_sigma, float).T if shape == (
+        layout.receivers, layout.knots) else None
     if each is None or not (np.isfinite(each).all() and (each > 0).all()):
-        raise ModelError(f"receiver positions: the range biases' prior sigma {np.shape(bias_sigma)}; allowed: "
-                         f"positive numbers [m], one or {layout.receivers}")
-    return np.r_[np.tile(each, layout.knots), shifts]
+        raise ModelError(f"receiver positions: the range biases' prior sigma {shape}; allowed: positive numbers "
+                         f"[m], one, {layout.receivers} or ({layout.receivers}, {layout.knots})")
+    return np.r_[each.ravel(), shifts]
 
 
 def _rescaled(sigma: np.ndarray, residuals: np.ndarray) -> np.ndarray:

@@ -206,10 +206,14 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
-    base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
-    prior = np.full(len(names), CLOCK_PRIOR * speed)
-    prior[base] = BASE_SIGMA * speed  # the time base: the receiver heard most in the pings fitted
     edges = np.array([span[0], max(span[1], span[0] + 1.0)]) if on is None else on.edges
+    near = knot_counts(np.isfinite(toa), times, edges)  # (R, K + 1) the arrivals touching each knot
+    base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
+    # the time base: the receiver heard most in the pings fitted; at a knot its arrivals do not reach (no
+    # deployment spans a redeployed array's season), the one heard most there (a common offset moves no position)
+    bases = np.where(near[base] > 0, base, near.argmax(axis=0))
+    prior = np.full((len(names), len(edges)), CLOCK_PRIOR * speed)
+    prior[bases, np.arange(len(edges))] = BASE_SIGMA * speed
     kwargs = {"biases": True, "times": times, "edges": edges, "rescale": True, "bias_sigma": prior,
               "speed_sigma": SPEED_PRIOR if sound_speed is None else None}
     places = np.full((len(toa), dim), np.nan)  # each ping from its own fix (at its depth in 3-D)
@@ -218,26 +222,31 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     fit = refine_receivers(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs)  # refused in one line
     check = held_out(toa, receivers, places, speed, sigma, HELD_SIGMA, **kwargs, clocks=True)
     fitted = speed * fit.speed_scale  # [m/s] (the speed given where not fitted)
-    # [s]: a range bias is its clock's offset; its σ the median over the knots (a knot at a stretch it hears little)
-    knots, spread = fit.bias / fitted, np.median(fit.bias_sigma, axis=1) / fitted
+    # [s]: a range bias is its clock's offset; its σ the median over the knots its arrivals touch (a knot at a
+    # stretch it hears little; a deployment's knots outside its own time tied by the prior alone)
+    mine = (near > 0) | (near == 0).all(axis=1, keepdims=True)
+    knots = fit.bias / fitted
+    spread = np.array([np.median(s[m]) for s, m in zip(fit.bias_sigma, mine)]) / fitted
     taken = (fit.arrivals > 0) & (spread <= LOOSE_SIGMA)  # (one tied more loosely than MAX_CLOCK_SIGMA: :func:`tied`)
-    taken[base] = True
+    taken[bases] = True
     if on is not None:  # the corrections added to the clocks the study was made on (its receivers alone)
         taken &= np.isin(names, on.receivers)
         knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else np.zeros(len(edges))
                                   for n in names])
-    knots -= knots[base]
+    knots -= knots[bases, np.arange(len(edges))]
     kept = np.flatnonzero(taken)
     clocks = Clocks([names[k] for k in kept], edges, knots[kept], clock_sigma=np.where(kept == base, 0.0,
                                                                                        spread[kept]))
-    largest = kept[int(np.argmax(np.abs(knots[kept]).max(axis=1)))]
+    reach = np.where(mine, np.abs(knots), 0.0)  # (the knots a deployment's own arrivals touch)
+    largest = kept[int(np.argmax(reach[kept].max(axis=1)))]
     summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
                "not_synchronised": [n for n, t in zip(names, taken) if not t] + unreached, "tags": [
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
-               "largest_offset_s": float(np.abs(knots[largest]).max()), "largest_offset_receiver": names[largest],
+               "largest_offset_s": float(reach[largest].max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": edges.tolist(),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
                "sound_speed_m_s": fitted,
+               "time_base_by_knot": [names[b] for b in bases] if (bases != base).any() else None,
                "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
                             "pings": check.pings, "folds": check.folds.tolist(), "helps": check.helps,
                             "rule": f"the fitted clocks' median chi2 per degree of freedom of the pings left out at "
@@ -245,6 +254,20 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                                     f"most blocks"},
                "converged": fit.converged}
     return ClockFit(clocks, summary, check.helps)
+
+
+def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(R, K + 1) each receiver's arrivals touching each knot at ``edges`` (K + 1,) [s] (a ping in ``[edges[j],
+    edges[j + 1])`` the knots j and j + 1, its offset linear between them; one beyond the ends the end's; ``heard``
+    (P, R), ``times`` (P,) [s]): a deployment's knots outside its own time are tied by the prior alone."""
+    K = len(edges) - 1
+    bins = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, max(K - 1, 0))
+    out = np.zeros((heard.shape[1], K + 1), np.int64)
+    for j in range(max(K, 1)):
+        here = heard[bins == j].sum(axis=0)
+        out[:, j] += here
+        out[:, min(j + 1, K)] += here
+    return out
 
 
 def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float) -> np.ndarray:

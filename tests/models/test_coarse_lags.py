@@ -71,3 +71,23 @@ def test_a_fast_tags_differences_are_bounded(monkeypatch):
     bounded = coarse_offsets(receiver, tag, time, 5, edges, 120.0, 0.3, base=0)
     truth = (offsets - offsets[0])[:, None]
     assert np.abs(whole.offsets - truth).max() < 0.15 and np.abs(bounded.offsets - truth).max() < 0.15
+
+
+def test_a_window_the_time_base_is_not_deployed_in_takes_another_receiver_as_its_base():
+    """Receiver 0 (the time base) recovered after the first 3 h window: in the second, where before no receiver was
+    tied (every offset NaN), each offset comes back from the receiver of the most pairs there, the differences
+    between any two receivers within the crossing time of the simulated clocks' (a common offset moves no position);
+    the first window's still from receiver 0."""
+    rng = np.random.default_rng(11)
+    offsets = rng.uniform(-20.0, 20.0, 5)
+    receiver, tag, time = _pings(rng, 5, offsets)
+    gone = (receiver == 0) & (time - offsets[0] > 3 * 3600.0)
+    receiver, tag, time = receiver[~gone], tag[~gone], time[~gone]
+    edges = np.array([-50.0, 3 * 3600.0, 6 * 3600.0 + 50.0])
+    found = coarse_offsets(receiver, tag, time, 5, edges, 120.0, 0.3, base=0)
+    first, second = found.offsets[:, 0], found.offsets[1:, 1]
+    assert np.abs(first - (offsets - offsets[0])).max() < 0.15 and first[0] == 0.0
+    assert np.isfinite(second).all() and (second == 0.0).sum() == 1
+    differences = second[:, None] - second[None]
+    truth = offsets[1:, None] - offsets[None, 1:]
+    assert np.abs(differences - truth).max() < 0.3

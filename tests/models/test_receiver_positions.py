@@ -324,3 +324,30 @@ def test_clocks_off_by_tens_of_milliseconds_are_fitted_with_their_own_prior():
         refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=np.zeros(8))
     with pytest.raises(ModelError, match="range biases' prior sigma"):
         refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=np.ones(3))
+
+
+def test_each_knot_may_take_its_own_time_base():
+    """The clocks of the test above at three knots, receiver 0 the time base at the first two and receiver 5 at the
+    last (``bias_sigma`` per receiver and knot: a redeployed array's, no deployment spanning the season): each
+    knot's offsets come back within 4 σ of the simulated clocks' less that knot's base's; a prior of another shape is
+    refused in one line."""
+    rng = np.random.default_rng(11)
+    receivers = rng.uniform(0.0, 400.0, (8, 2))
+    toa, _ = _towed(rng, receivers, pings=400, late=0.0)
+    times = np.nanmin(np.where(np.isfinite(toa), toa, np.inf), axis=1)
+    last = times[np.isfinite(times)].max() + 1.0
+    edges = np.array([0.0, 0.5 * last, last])
+    clock = rng.uniform(-0.03, 0.03, 8)[:, None] + rng.uniform(-5e-6, 5e-6, 8)[:, None] * edges[None]
+    toa = toa + np.stack([np.interp(times, edges, knots) for knots in clock], axis=1)
+    starts = fix_pings(toa, receivers, C, SIGMA)[0]
+    bases = np.array([0, 0, 5])
+    prior = np.full((8, 3), 1.0 * C)
+    prior[bases, np.arange(3)] = 1e-7 * C
+    fit = refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=prior,
+                           times=times, edges=edges)
+    truth = (clock - clock[bases, np.arange(3)]) * C
+    assert np.all(np.abs(fit.bias - truth) < 4 * fit.bias_sigma + 1e-3), np.abs(fit.bias - truth) / fit.bias_sigma
+    assert fit.bias_sigma[0, 2] > 10 * fit.bias_sigma[5, 2] and fit.bias_sigma[5, 0] > 10 * fit.bias_sigma[0, 0]
+    with pytest.raises(ModelError, match=r"allowed: positive numbers \[m\], one, 8 or \(8, 3\)"):
+        refine_receivers(toa, receivers, starts, C, SIGMA, 0.01, biases=True, bias_sigma=np.ones((8, 2)),
+                         times=times, edges=edges)
