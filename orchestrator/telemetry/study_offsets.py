@@ -195,12 +195,16 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     parts = [pooled(outcome.matrices[folder], column) for folder in moving]
     toa, times = np.vstack([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
     times = np.where(np.isfinite(times), times, span[0])
-    heights = None if dim == 2 else np.concatenate([held_heights(outcome.matrices[f], deployments, outcome.summary.get(
-        "water_depth"), speed, sigma) for f in moving])
+    owner = np.concatenate([np.full(len(p[0]), i) for i, p in enumerate(parts)])  # each ping's tag, its row there
+    local = np.concatenate([np.arange(len(p[0])) for p in parts])
     usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread in time)
     keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
         if len(usable) > MAX_PINGS else usable
-    toa, times, heights = toa[keep], times[keep], None if heights is None else heights[keep]
+    toa, times, owner, local = toa[keep], times[keep], owner[keep], local[keep]
+    heights = None if dim == 2 else np.full(len(toa), np.nan)
+    for i in np.unique(owner) if heights is not None else []:  # (the pings kept alone fixed)
+        heights[owner == i] = held_heights(outcome.matrices[moving[i]], deployments, outcome.summary.get(
+            "water_depth"), speed, sigma, local[owner == i])
     # the receivers these pings reach alone (a network's thousand others: not synchronised)
     reached = np.flatnonzero(np.isfinite(toa).any(axis=0)) if len(toa) else np.arange(len(names))
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
@@ -270,7 +274,8 @@ def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.n
     return out
 
 
-def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float) -> np.ndarray:
+def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float,
+                 rows: np.ndarray | None = None) -> np.ndarray:
     """(P,) [m, z up] the height each of a tag's pings is held at in a 3-D study's clock fit: its depth sensor's
     reading (``pings.csv``'s ``depth_m``) where it has one, else its own fix's with the prior its tracker takes
     (:mod:`~sblsim.orchestrator.tracks.depth`: receivers in one plane hold it at mid-water, or at their mean depth;
@@ -278,25 +283,27 @@ def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, si
     ``water_depth`` (``water``: given, or the deepest bottom of the receivers that heard the tag), and the surface
     bounding it), else the prior's (a fix with no arrival to spare, or none: the receivers' mean where no prior is
     taken). ``matrix`` the tag's (its ``positions`` (R, 3) [m]), at the sound speed ``c`` [m/s] and a
-    timing noise ``sigma`` [s]."""
+    timing noise ``sigma`` [s]; ``rows`` (P,) the pings asked (None: every one; a tag's decision of its prior on
+    these alone)."""
     water = water or {}
     deepest = water.get("water_depth_m") if water.get("source") == "given" else bottom_water_depth(
         deployments.table.set_index("receiver")["bottom_depth"].reindex(matrix.names).to_numpy(float),
         np.isfinite(matrix.toa).any(axis=0)) if water.get("source") == "bottom_depth" else None
     positions = np.asarray(matrix.positions, float)
     prior = plane_prior(positions, deepest, DEPTH_SIGMA)  # (at least a depth reading's σ, as the tracker's)
-    rows = len(matrix.toa)
-    fixed = _fix(matrix.toa, positions, c, sigma, prior)
+    rows = np.arange(len(matrix.toa)) if rows is None else np.asarray(rows, np.int64)
+    toa = matrix.toa[rows]
+    fixed = _fix(toa, positions, c, sigma, prior)
     if prior is None:  # the arrivals' depth, where they determine it (else the receivers' mean), in the water
         fx, _, fc, used, _ = fixed
         prior = undetermined_depth(None, fx, fc, used.sum(axis=1), positions, deepest)
-        fixed = fixed if prior is None else _fix(matrix.toa, positions, c, sigma, prior)
+        fixed = fixed if prior is None else _fix(toa, positions, c, sigma, prior)
     fallback = -prior.depth if prior is not None else float(positions[:, 2].mean())
     # a fix with no arrival to spare (four, its depth free) says nothing of its depth: the prior's, or the receivers'
     told = np.isfinite(fixed[0][:, 2]) & (fixed[3].sum(axis=1) >= (4 if prior is not None else 5))
     height = np.clip(np.where(told, fixed[0][:, 2], fallback), -np.inf if deepest is None else -deepest, 0.0)
-    readings = matrix.pings["depth_m"].to_numpy(float) if "depth_m" in matrix.pings and len(matrix.pings) == rows \
-        else np.full(rows, np.nan)
+    readings = matrix.pings["depth_m"].to_numpy(float)[rows] if "depth_m" in matrix.pings and \
+        len(matrix.pings) == len(matrix.toa) else np.full(len(rows), np.nan)
     return np.where(np.isfinite(readings), -readings, height)
 
 
