@@ -82,6 +82,9 @@ MAX_CLOCK_SIGMA = 1e-3
 #: The fewest clocks the pings must tie within :data:`MAX_CLOCK_SIGMA` for the fit to be taken (a position needs
 #: four receivers at once).
 MIN_TIED = 4
+#: The median χ² per degree of freedom of the pings left out above which the clocks' fit is said to leave more than
+#: the timing noise (:func:`misfit`; a consistent fix's median is below 1, the simulated studies' 0.5 to 0.8).
+MISFIT = 4.0
 #: The most a clock's offset σ [s] may be in a round of the fit (:func:`fitted_study`: a round's fixes on clocks
 #: still off tie them more loosely than the last's; at ±0.2 s a first round's reached 10 ms): one tied more loosely
 #: (its arrivals would split the pings it hears) is left out of the next round.
@@ -403,6 +406,23 @@ def said(info: dict[str, Any]) -> list[str]:
     return out
 
 
+def misfit(summary: dict[str, Any]) -> str | None:
+    """The warning where the moving tags' pings left out fit the clocks they were tracked on (``summary``:
+    ``study.json``'s; its ``clocks`` fitted or checked) with a median χ² per degree of freedom above :data:`MISFIT`:
+    more than the timing noise explains (the receivers' positions off, the noise larger than taken), which the
+    tracks' σ hold only where a survey error stated covers it; else None."""
+    info = summary["clocks"]
+    held = info.get("held_out") if info["source"] == FITTED else (info.get("checked") or {}).get("held_out")
+    if not held or held["fitted_chi2_per_dof"] <= MISFIT:
+        return None
+    noise = (summary.get("toa_noise") or {}).get("sigma_s")
+    return (f"the moving tags' pings left out fit the clocks with chi2 per degree of freedom "
+            f"{held['fitted_chi2_per_dof']:.3g} at the timing noise taken"
+            + (f" ({noise * 1e3:.3g} ms)" if isinstance(noise, float) else "") + ": more than the noise explains, the "
+            "receivers' positions off or the timing noise larger; the tracks' σ hold it only where the survey's "
+            "error stated (--survey-sigma M, per axis) or the timing noise (--toa-sigma S) covers it")
+
+
 def tied(clocks: Clocks, sigma: dict[str, float]) -> list[str]:
     """The receivers of ``clocks`` whose offset's σ (``sigma`` [s] by receiver: a fit's on these clocks, the last)
     exceeds :data:`MAX_CLOCK_SIGMA` (its median over the knots): tied to the time base too loosely to be taken."""
@@ -433,4 +453,4 @@ def note(summary: dict[str, Any]) -> str:
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "held_heights", "note", "said", "split_reasons"]
+           "fitted_study", "held_heights", "misfit", "note", "said", "split_reasons"]

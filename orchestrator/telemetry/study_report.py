@@ -202,14 +202,19 @@ def closing_line(table: Any, seconds: float, out: Path, files: str) -> str:
 
 
 def study_lines(outcome: Any) -> list[tuple[str, bool]]:
-    """The console's lines of a study once it has run, each with whether it is for standard error: the tags kept
+    """The console's lines of a study once it has run, each with whether it is for standard error: the clocks' fit
+    from the tags' pings where it leaves more than the noise (:func:`~.study_offsets.misfit`), the tags kept
     from an interrupted run (:mod:`~sblsim.orchestrator.tracks.resume`), its tags' (:func:`tag_lines`), its
     reference tags' (:func:`reference_lines`) and its refined positions'
     (:func:`~sblsim.orchestrator.telemetry.study_positions.lines`)."""
-    from sblsim.orchestrator.telemetry.study_positions import lines  # numpy and pandas: loaded with the study
+    from sblsim.orchestrator.telemetry.study_offsets import misfit  # numpy and pandas: loaded with the study
+    from sblsim.orchestrator.telemetry.study_positions import lines
 
     resumed = outcome.summary.get("resumed")
     kept = []
+    unheld = misfit(outcome.summary)
+    if unheld:
+        kept.append((f"sblsim: warning: {unheld}", True))
     if resumed:
         what = " and ".join([f"{resumed['tags_kept']} of {resumed['tags']} tags"] + resumed["taken"])
         kept.append((f"resumed: {what} kept from an interrupted run of this output (their inputs unchanged)", False))

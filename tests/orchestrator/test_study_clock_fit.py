@@ -17,11 +17,13 @@ from sblsim.orchestrator.telemetry.simulate import simulate_study
 DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
 
-def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False, receivers: int = 9):
+def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False, receivers: int = 9,
+           moved: float = 0.0):
     """A simulated GLATOS study (``receivers``, 3 animals, 6 hours) whose sync tags are never heard (``unheard``: their
     rows dropped from the detections) or never named (the deployments' ``transmitter`` emptied), with ``depths``
     its deployments' ``instrument_depth`` (5 m: the tags' too, the simulation being in one plane) and
-    ``bottom_depth`` (20 to 36 m), run through the CLI; the simulation, the study's folder and its ``study.json``."""
+    ``bottom_depth`` (20 to 36 m), each deployment's position off by ``moved`` [m per axis, σ] (its survey's
+    error), run through the CLI; the simulation, the study's folder and its ``study.json``."""
     from sblsim.orchestrator import cli
 
     sim = simulate_study(n_receivers=receivers, n_tags=3, days=0.25, redeployed=0, seed=5, offset=offset,
@@ -34,6 +36,11 @@ def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = 
         sheet = sheet.assign(transmitter="")
     if depths:
         sheet = sheet.assign(instrument_depth=5.0, bottom_depth=20.0 + 2.0 * np.arange(len(sheet)))
+    if moved:
+        north, east = np.random.default_rng(99).normal(0.0, moved, (2, len(sheet)))
+        sheet["deploy_lat"] = (sheet["deploy_lat"].astype(float) + north / 111_320.0).map("{:.10f}".format)
+        sheet["deploy_long"] = (sheet["deploy_long"].astype(float) + east / (
+            111_320.0 * np.cos(np.radians(sheet["deploy_lat"].astype(float))))).map("{:.10f}".format)
     sheet.to_csv(files["deployments"], index=False)
     out = tmp_path / "study"
     assert cli.main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
@@ -73,6 +80,7 @@ def test_clocks_off_by_tens_of_milliseconds_are_fitted_from_the_animals_pings(tm
     assert any(n.startswith("the receivers' clocks, taken as logged, were off: fitted from 3 moving tags'")
                for n in study["notes"]), study["notes"]
     said = capsys.readouterr()
+    assert "more than the noise explains" not in said.err  # (the pings fit the clocks: no misfit said)
     assert "clocks fitted from 3 moving tags' 448 pings against" in said.out
     assert "taken as logged, no sync tag heard by two receivers, they were off by up to" in said.out
     assert "were off: fitted from 3 moving tags'" in said.out + said.err
@@ -93,6 +101,20 @@ def test_clocks_that_are_right_are_checked_and_kept_as_logged(tmp_path, capsys):
             "well as clocks fitted from the others") in capsys.readouterr().out
     errors = _errors(sim, out, str(sim.clocks["serial"].iloc[0]))
     assert errors.groupby("tag")["error"].median().max() < 0.5
+
+
+def test_pings_the_fitted_clocks_leave_misfit_are_said_to_exceed_the_tracks_sigma(tmp_path, capsys):
+    """The deployments' positions off by 2 m per axis (σ) and no survey error stated, clocks ±20 ms: the fit takes
+    the clocks (the tracks a median 1-2.3 m off, as the sync tags' study of the same positions, 1.5-1.6 m), but the
+    pings left out keep a χ² per degree of freedom above 4 at the timing noise taken, and the tracks' σ do not hold
+    their error (NEES 64-161): said in one warning naming what to state."""
+    from sblsim.orchestrator.telemetry.study_offsets import FITTED, MISFIT
+
+    _, _, study = _study(tmp_path, 0.02, 0.0, unheard=False, moved=2.0)
+    assert study["clocks"]["source"] == FITTED and study["clocks"]["held_out"]["fitted_chi2_per_dof"] > MISFIT
+    warning = [line for line in capsys.readouterr().err.splitlines() if "more than the noise explains" in line]
+    assert len(warning) == 1 and warning[0].startswith("sblsim: warning: the moving tags' pings left out fit the "
+                                                       "clocks") and "--survey-sigma M" in warning[0], warning
 
 
 def _offsets_agree(sim, clocks: dict, within: float) -> None:
