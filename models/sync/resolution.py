@@ -213,5 +213,4 @@ def residual_warning(quanta: np.ndarray, residuals: np.ndarray, receivers: list[
 
 
 __all__ = ["QUANTA", "QUANTUM_NAMES", "RESOLVABLE", "RoundingError", "check_resolution", "common_quantum",
-           "resolution_warning",
-           "residual_warning", "rounding_sigma", "time_quantum"]
+           "resolution_warning", "residual_warning", "rounding_sigma", "time_quantum"]

@@ -358,7 +358,8 @@ def fitted_study(outcome, again: Callable[[tuple | None, bool], Any], deployment
             fitted = None
         elif loose:
             fitted = (_without(fitted[0], loose), fitted[1] | {
-                "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose})
+                "not_synchronised": fitted[1]["not_synchronised"] + loose, "loosely_tied": loose,
+                "receivers": fitted[1]["receivers"] - len(loose)})
     if fitted is None:  # the clocks as logged, checked (aligned coarsely and no fit: never tracked on those)
         clocks = first.clocks if start is None else logged_clocks([str(n) for n in deployments.table["receiver"]],
                                                                   float(np.floor(span[0])), float(np.ceil(span[1])))
@@ -413,11 +414,13 @@ def misfit(summary: dict[str, Any]) -> str | None:
     tracks' σ hold only where a survey error stated covers it; else None."""
     info = summary["clocks"]
     held = info.get("held_out") if info["source"] == FITTED else (info.get("checked") or {}).get("held_out")
-    if not held or held["fitted_chi2_per_dof"] <= MISFIT:
+    # (the clocks tracked on: the fitted, or those as logged where the fit did not help)
+    chi2 = None if not held else held["fitted_chi2_per_dof" if info["source"] == FITTED else "logged_chi2_per_dof"]
+    if chi2 is None or chi2 <= MISFIT:
         return None
     noise = (summary.get("toa_noise") or {}).get("sigma_s")
-    return (f"the moving tags' pings left out fit the clocks with chi2 per degree of freedom "
-            f"{held['fitted_chi2_per_dof']:.3g} at the timing noise taken"
+    return (f"the moving tags' pings left out fit the clocks with chi2 per degree of freedom {chi2:.3g} at the "
+            f"timing noise taken"
             + (f" ({noise * 1e3:.3g} ms)" if isinstance(noise, float) else "") + ": more than the noise explains, the "
             "receivers' positions off or the timing noise larger; the tracks' σ hold it only where the survey's "
             "error stated (--survey-sigma M, per axis) or the timing noise (--toa-sigma S) covers it")
@@ -425,7 +428,8 @@ def misfit(summary: dict[str, Any]) -> str | None:
 
 def tied(clocks: Clocks, sigma: dict[str, float]) -> list[str]:
     """The receivers of ``clocks`` whose offset's σ (``sigma`` [s] by receiver: a fit's on these clocks, the last)
-    exceeds :data:`MAX_CLOCK_SIGMA` (its median over the knots): tied to the time base too loosely to be taken."""
+    exceeds :data:`MAX_CLOCK_SIGMA` (its median over the knots its arrivals touch): tied to the time base too loosely
+    to be taken."""
     return [n for n in clocks.receivers if sigma.get(n, 0.0) > MAX_CLOCK_SIGMA]
 
 
