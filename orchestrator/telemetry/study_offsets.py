@@ -46,6 +46,7 @@ from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
+from sblsim.models.tracking.refinement_terms import Unknowns
 from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
@@ -267,14 +268,11 @@ def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.n
     """(R, K + 1) each receiver's arrivals touching each knot at ``edges`` (K + 1,) [s] (a ping in ``[edges[j],
     edges[j + 1])`` the knots j and j + 1, its offset linear between them; one beyond the ends the end's; ``heard``
     (P, R), ``times`` (P,) [s]): a deployment's knots outside its own time are tied by the prior alone."""
-    K = len(edges) - 1
-    bins = np.clip(np.searchsorted(edges, times, side="right") - 1, 0, max(K - 1, 0))
-    out = np.zeros((heard.shape[1], K + 1), np.int64)
-    for j in range(max(K, 1)):
-        here = heard[bins == j].sum(axis=0)
-        out[:, j] += here
-        out[:, min(j + 1, K)] += here
-    return out
+    bins = Unknowns.of(heard.shape[1], True, edges, False).bins(times, len(times))[0]  # (the fit's own)
+    out = np.zeros((len(edges), heard.shape[1]), np.int64)
+    np.add.at(out, bins, heard)
+    np.add.at(out, bins + 1, heard)
+    return out.T
 
 
 def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float,
