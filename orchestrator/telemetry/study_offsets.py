@@ -52,7 +52,7 @@ from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
 from sblsim.orchestrator.telemetry.study_positions import pooled
-from sblsim.orchestrator.tracks.depth import bottom_water_depth, undetermined_depth
+from sblsim.orchestrator.tracks.depth import undetermined_depth
 from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
 
 #: The clocks' sources whose clocks are fitted from the tags' pings (no sync tag named, or none heard by two
@@ -157,8 +157,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
         The study made on the clocks ``on`` (its moving tags' matrices: each ping starts from its own fix).
     deployments : Deployments
         Its deployments (the receivers' surveyed positions, fitted in the horizontal plane: in 3-D each ping held at
-        its tracker's depth, :func:`held_heights`; their ``bottom_depth`` bounding it where ``study.json``'s
-        ``water_depth`` takes them).
+        its tracker's depth, :func:`held_heights`, within the water depth ``study.json``'s ``water_depth`` gave its
+        tracker).
     span : tuple of float
         [s since 1970 UTC] the study's first and last detection: the clocks' two knots (an offset and a drift).
     on : Clocks, optional
@@ -207,8 +207,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     toa, times, owner, local = toa[keep], times[keep], owner[keep], local[keep]
     heights = None if dim == 2 else np.full(len(toa), np.nan)
     for i in np.unique(owner) if heights is not None else []:  # (the pings kept alone fixed)
-        heights[owner == i] = held_heights(outcome.matrices[moving[i]], deployments, outcome.summary.get(
-            "water_depth"), speed, sigma, local[owner == i])
+        heights[owner == i] = held_heights(outcome.matrices[moving[i]], outcome.summary.get("water_depth"), speed,
+                                           sigma, local[owner == i])
     # the receivers these pings reach alone (a network's thousand others: not synchronised)
     reached = np.flatnonzero(np.isfinite(toa).any(axis=0)) if len(toa) else np.arange(len(names))
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
@@ -275,21 +275,20 @@ def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.n
     return out.T
 
 
-def held_heights(matrix, deployments, water: dict[str, Any] | None, c: float, sigma: float,
+def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,
                  rows: np.ndarray | None = None) -> np.ndarray:
     """(P,) [m, z up] the height each of a tag's pings is held at in a 3-D study's clock fit: its depth sensor's
     reading (``pings.csv``'s ``depth_m``) where it has one, else its own fix's with the prior its tracker takes
     (:mod:`~sblsim.orchestrator.tracks.depth`: receivers in one plane hold it at mid-water, or at their mean depth;
     a depth the arrivals do not determine, at the receivers' mean; the water's depth, ``study.json``'s
-    ``water_depth`` (``water``: given, or the deepest bottom of the receivers that heard the tag), and the surface
-    bounding it), else the prior's (a fix with no arrival to spare, or none: the receivers' mean where no prior is
-    taken). ``matrix`` the tag's (its ``positions`` (R, 3) [m]), at the sound speed ``c`` [m/s] and a
-    timing noise ``sigma`` [s]; ``rows`` (P,) the pings asked (None: every one; a tag's decision of its prior on
-    these alone)."""
+    ``water_depth`` (``water``: given, or each tag's as the study handed it to its tracker, ``per_tag_m``: the
+    deepest bottom of the receivers that heard it), and the surface bounding it), else the prior's (a fix with no
+    arrival to spare, or none: the receivers' mean where no prior is taken). ``matrix`` the tag's (its ``positions``
+    (R, 3) [m], its ``summary``'s ``tag``), at the sound speed ``c`` [m/s] and a timing noise ``sigma`` [s];
+    ``rows`` (P,) the pings asked (None: every one; a tag's decision of its prior on these alone)."""
     water = water or {}
-    deepest = water.get("water_depth_m") if water.get("source") == "given" else bottom_water_depth(
-        deployments.table.set_index("receiver")["bottom_depth"].reindex(matrix.names).to_numpy(float),
-        np.isfinite(matrix.toa).any(axis=0)) if water.get("source") == "bottom_depth" else None
+    deepest = water.get("water_depth_m") if water.get("source") == "given" else \
+        (water.get("per_tag_m") or {}).get(matrix.summary["tag"])
     positions = np.asarray(matrix.positions, float)
     prior = plane_prior(positions, deepest, DEPTH_SIGMA)  # (at least a depth reading's σ, as the tracker's)
     rows = np.arange(len(matrix.toa)) if rows is None else np.asarray(rows, np.int64)

@@ -233,25 +233,24 @@ def test_each_ping_s_depth_held_in_a_3d_fit_is_the_one_its_tracker_would_take():
     deep = np.c_[xy, np.repeat([-5.0, -40.0], 4)]
     places = np.c_[rng.uniform(50, 350, (300, 2)), np.full(300, -10.0)]
     names = [f"r{k}" for k in range(len(xy))]
-    deployments = SimpleNamespace(table=pd.DataFrame({"receiver": names, "bottom_depth": 45.0}))
 
     def matrix(receivers, pings=None):
         toa = 100.0 + 5.0 * np.arange(len(places))[:, None] + np.linalg.norm(
             places[:, None] - receivers[None], axis=2) / 1480.0 + 1e-4 * rng.normal(size=(len(places), len(xy)))
         toa[rng.uniform(size=toa.shape) < 0.2] = np.nan
-        return SimpleNamespace(toa=toa, positions=receivers, names=names,
+        return SimpleNamespace(toa=toa, positions=receivers, names=names, summary={"tag": "t"},
                                pings=pd.DataFrame(index=range(len(places))) if pings is None else pings)
 
-    for water in (None, {"source": "bottom_depth"}):
-        held = held_heights(matrix(deep), deployments, water, 1480.0, 1e-4)
+    for water in (None, {"source": "bottom_depth", "per_tag_m": {"t": 45.0}}):  # (the tag's, as its tracker's)
+        held = held_heights(matrix(deep), water, 1480.0, 1e-4)
         assert np.median(np.abs(held + 10.0)) < 1.0 and np.abs(np.median(held) - deep[:, 2].mean()) > 8.0, water
         assert held.min() >= -45.0 if water else (held <= 0.0).all()
     readings = np.where(np.arange(len(places)) % 2, 12.0, np.nan)
-    held = held_heights(matrix(deep, pd.DataFrame({"depth_m": readings})), deployments, None, 1480.0, 1e-4)
+    held = held_heights(matrix(deep, pd.DataFrame({"depth_m": readings})), None, 1480.0, 1e-4)
     assert (held[1::2] == -12.0).all() and np.median(np.abs(held[::2] + 10.0)) < 1.0
     flat = np.c_[xy, np.full(len(xy), -5.0)]
-    assert (held_heights(matrix(flat), deployments, None, 1480.0, 1e-4) == -5.0).all()
-    held = held_heights(matrix(flat), deployments, {"source": "given", "water_depth_m": 30.0}, 1480.0, 1e-4)
+    assert (held_heights(matrix(flat), None, 1480.0, 1e-4) == -5.0).all()
+    held = held_heights(matrix(flat), {"source": "given", "water_depth_m": 30.0}, 1480.0, 1e-4)
     assert ((held >= -30.0) & (held <= 0.0)).all()
 
 
