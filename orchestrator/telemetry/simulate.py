@@ -4,8 +4,10 @@ detections on their own drifting clocks as a VUE export or a Fathom CSV, and a t
 type; with the truth (each tag's emissions and positions, each deployment's clock) to score what is made of them.
 
 The array is a jittered grid of receivers ``spacing`` apart around ``centre`` (projected in its UTM zone), each
-deployment's clock ``τ + a + b τ`` at the true time ``τ`` (seconds from the study's start; ``a`` uniform in
-±``offset``, ``b`` in ±``drift``; a redeployed receiver's clock set again at its redeployment). A receiver hears an
+deployment's clock ``τ + a + b τ + w sin(2π τ / T + φ)`` at the true time ``τ`` (seconds from the study's start; ``a``
+uniform in ±``offset``, ``b`` in ±``drift``, ``w`` in ±``wander``, ``T`` in one to three days, ``φ`` in a turn: a
+crystal's rate following the water's temperature, which a drift corrected at offload as a line leaves; a redeployed
+receiver's clock set again at its redeployment). A receiver hears an
 emission at distance ``d`` with the logistic detection range curve ``1 / (1 + exp((d − r50) / (r50 / 6)))``
 (50 % at ``range_50``), along the straight line at ``sound_speed``, with a Gaussian timing noise ``sigma_toa``;
 only while it is deployed. A redeployed receiver, out of the water for an hour (a tenth of a short study), logs
@@ -63,7 +65,7 @@ class SimulatedStudy:
         Each animal's truth (full ID -> DataFrame of ``tau`` [s from the start], ``x``, ``y`` [m in the frame]).
     clocks : pandas.DataFrame
         Each deployment's clock: ``deployment`` (its position in ``deployments``), ``serial``, ``a`` [s], ``b``
-        [s/s], ``start``, ``end`` [s from the start].
+        [s/s], ``w`` [s], ``period`` [s], ``phase`` [rad] (:meth:`offset`), ``start``, ``end`` [s from the start].
     frame : Frame
         The UTM zone of the centre.
     origin : float
@@ -82,11 +84,15 @@ class SimulatedStudy:
     origin: float
     positions: np.ndarray = field(repr=False, default=None)
 
+    def offset(self, deployment: int, tau: np.ndarray) -> np.ndarray:
+        """[s] deployment ``deployment``'s clock's offset at the true times ``tau`` [s from the start]:
+        ``a + b τ + w sin(2π τ / T + φ)`` (the module docstring)."""
+        return _offset(self.clocks, np.full(np.shape(tau), deployment), np.asarray(tau, float))
+
     def clock_time(self, deployment: int, tau: np.ndarray) -> np.ndarray:
         """[s since 1970 UTC] deployment ``deployment``'s clock reading at the true times ``tau`` [s from the
         start]."""
-        a, b = self.clocks.loc[deployment, ["a", "b"]]
-        return self.origin + tau + a + b * tau
+        return self.origin + tau + self.offset(deployment, tau)
 
     def truth_at(self, tag: str, epoch: np.ndarray, deployment: int) -> np.ndarray:
         """(n, 2) [m in the frame] animal ``tag``'s true position at the times ``epoch`` (n,) [s since 1970 UTC]
@@ -237,7 +243,8 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
                    spacing: float = 150.0, centre: tuple[float, float] = (60.38, 5.34),
                    start: str = "2024-06-03T00:00:00Z", sound_speed: float = 1480.0,
                    sigma_toa: float | Sequence[float] = 0.15e-3,
-                   range_50: float = 220.0, offset: float = 2.0, drift: float = 20e-6) -> SimulatedStudy:
+                   range_50: float = 220.0, offset: float = 2.0, drift: float = 20e-6,
+                   wander: float = 0.0) -> SimulatedStudy:
     """Simulate a study (the module docstring).
 
     Parameters
@@ -257,8 +264,9 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     sound_speed, sigma_toa, range_50
         [m/s], the timing noise [s] (one, or each receiver's: ``n_receivers`` values, a redeployed receiver's the same
         at both its stations), the detection range curve's 50 % range [m].
-    offset, drift
-        The clocks' offsets [s] and drifts [s/s], uniform in ±.
+    offset, drift, wander
+        The clocks' offsets [s], drifts [s/s] and the amplitudes [s] of their wander about the line (a period of one
+        to three days: the module docstring), uniform in ±.
 
     Returns
     -------
@@ -293,6 +301,10 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     clocks = pd.DataFrame({"deployment": np.arange(len(table)), "serial": [serials[k] for k in table["receiver"]],
                            "a": rng.uniform(-offset, offset, len(table)), "b": rng.uniform(-drift, drift, len(table)),
                            "start": table["start"], "end": table["end"]})
+    if wander:  # (drawn only where asked: a study without wander draws what it drew before)
+        clocks = clocks.assign(w=rng.uniform(-wander, wander, len(table)),
+                               period=rng.uniform(86400.0, 3 * 86400.0, len(table)),
+                               phase=rng.uniform(0.0, 2 * np.pi, len(table)))
     sync_ids = [f"{SYNC_SPACE}-{60000 + k}" for k in range(n_receivers)]
     lat, lon = frame.to_latlon(positions[:, 0], positions[:, 1])
     deployments = pd.DataFrame({
@@ -349,12 +361,21 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     arrivals = pd.concat(parts, ignore_index=True)
     j = arrivals["deployment"].to_numpy()
     tau = arrivals["tau"].to_numpy()
-    clock = origin + tau + clocks["a"].to_numpy()[j] + clocks["b"].to_numpy()[j] * tau
+    clock = origin + tau + _offset(clocks, j, tau)
     detections = pd.DataFrame({"serial": clocks["serial"].to_numpy()[j], "model": "VR2AR",
                                "transmitter": arrivals["transmitter"].to_numpy(), "time": clock})
     detections = detections.sort_values(["serial", "time"], kind="stable").reset_index(drop=True)
     return SimulatedStudy(deployments, detections, pd.DataFrame(sheet), sequences, truth, clocks, frame, origin,
                           positions)
+
+
+def _offset(clocks: pd.DataFrame, deployment: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """[s] each deployment's clock's offset (``clocks``' row ``deployment`` (n,)) at the true times ``tau`` (n,) [s]."""
+    out = clocks["a"].to_numpy()[deployment] + clocks["b"].to_numpy()[deployment] * tau
+    if "w" in clocks:
+        w, period, phase = (clocks[k].to_numpy()[deployment] for k in ("w", "period", "phase"))
+        out = out + w * np.sin(2 * np.pi * tau / period + phase)
+    return out
 
 
 __all__ = ["SimulatedStudy", "fathom_text", "glatos_text", "simulate_study", "vue_text"]

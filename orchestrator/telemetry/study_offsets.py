@@ -214,7 +214,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
-    edges = np.array([span[0], max(span[1], span[0] + 1.0)]) if on is None else on.edges
+    edges = knot_times(span) if on is None else on.edges
     near = knot_counts(np.isfinite(toa), times, edges)  # (R, K + 1) the arrivals touching each knot
     base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
     # the time base: the receiver heard most in the pings fitted; at a knot its arrivals do not reach (no
@@ -262,6 +262,16 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                                     f"most blocks"},
                "converged": fit.converged}
     return ClockFit(clocks, summary, check.helps)
+
+
+def knot_times(span: tuple[float, float]) -> np.ndarray:
+    """(K + 1,) [s] the knots of clocks fitted as logged (no coarse alignment): the study's first and last detection
+    ``span`` and every :data:`WINDOW` between, as the coarse alignment's windows (:func:`aligned`). A clock's rate
+    follows its crystal's temperature, which a drift corrected at offload as a line leaves: at 1 ppm a day's swing
+    is ±14 ms, 20 m of range (simulated, :func:`~sblsim.orchestrator.telemetry.simulate.simulate_study`'s
+    ``wander``)."""
+    end = max(span[1], span[0] + 1.0)
+    return np.linspace(span[0], end, max(int(np.ceil((end - span[0]) / WINDOW)), 1) + 1)
 
 
 def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.ndarray:
