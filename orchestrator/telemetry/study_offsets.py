@@ -12,7 +12,8 @@ So, the tags' matrices made and none tracked:
    detections of the same tags), they are aligned from those lags (:func:`aligned`,
    :mod:`~sblsim.models.sync.coarse_lags`), to within that time;
 2. each receiver's offset from the clocks the matrices were made on, linear in time between knots (the study's first
-   and last detection, or the coarse alignment's windows), is fitted with the moving tags' pings' places and emission
+   and last detection and every :data:`WINDOW` between, :func:`knot_times`, or the coarse alignment's windows), is
+   fitted with the moving tags' pings' places and emission
    times, each ping from its own fix (in 3-D at the depth its tracker takes: :func:`held_heights`) (:func:`fit_clocks`;
    :func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias with a broad prior,
    the positions held at the survey's, a ping heard by four receivers or more, the sound speed's scale fitted with
@@ -70,7 +71,7 @@ HELD_SIGMA, BASE_SIGMA = 0.01, 1e-7
 SPEED_PRIOR = 0.05
 #: The slowest sound speed [m/s] and a margin [s] of the time the sound takes across the array, the largest lag [s]
 #: between two clocks looked for, and the windows [s] of a coarse alignment (:func:`aligned`: a clock drifting by
-#: 20 ppm moves by 0.2 s in one).
+#: 20 ppm moves by 0.2 s in one), the longest span between the fine fit's knots too (:func:`knot_times`).
 SLOWEST, CROSSING_MARGIN, MAX_LAG, WINDOW = 1400.0, 0.05, 120.0, 3 * 3600.0
 #: The most pings fitted (heard by four receivers or more; a season's spread evenly in time): 20,000 pings of 20
 #: receivers tie each clock to a few microseconds, and a fit's cost is linear in them.
@@ -160,7 +161,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
         its tracker's depth, :func:`held_heights`, within the water depth ``study.json``'s ``water_depth`` gave its
         tracker).
     span : tuple of float
-        [s since 1970 UTC] the study's first and last detection: the clocks' two knots (an offset and a drift).
+        [s since 1970 UTC] the study's first and last detection: the clocks' first and last knots
+        (:func:`knot_times`: a knot every :data:`WINDOW` between).
     on : Clocks, optional
         The clocks the study was made on (a coarse alignment's or an earlier round's fit, with their knots): the
         offsets fitted are added to theirs. None: as logged.
