@@ -13,8 +13,8 @@ So, the tags' matrices made and none tracked:
    :mod:`~sblsim.models.sync.coarse_lags`), to within that time;
 2. each receiver's offset from the clocks the matrices were made on, linear in time between knots (the study's first
    and last detection and every :data:`WINDOW` between, :func:`knot_times`, or the coarse alignment's windows), is
-   fitted with the moving tags' pings' places and emission
-   times, each ping from its own fix (in 3-D at the depth its tracker takes: :func:`held_heights`) (:func:`fit_clocks`;
+   fitted with the moving tags' pings' places and emission times, each ping from its own fix (in 3-D at the depth its
+   tracker takes: :func:`held_heights`) (:func:`fit_clocks`;
    :func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias with a broad prior,
    the positions held at the survey's, a ping heard by four receivers or more, the sound speed's scale fitted with
    them where none is given), one receiver's clock the time base (an offset common to every clock moves no
@@ -130,7 +130,7 @@ def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Cloc
         return clocks, info
     time = frame["time"].to_numpy(float)
     span = clocks.edges[0], clocks.edges[-1]
-    edges = np.linspace(span[0], span[1], max(int(np.ceil((span[1] - span[0]) / WINDOW)), 1) + 1)
+    edges = knot_times(span)
     base = int(np.bincount(receiver, minlength=len(names)).argmax())
     lags = coarse_offsets(receiver, pd.factorize(frame["tag"])[0], time, len(names), edges, MAX_LAG, crossing, base)
     if lags.largest_lag <= crossing:  # the clocks as logged agree to within a crossing: the fine fit's to say
@@ -268,7 +268,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
 
 def knot_times(span: tuple[float, float]) -> np.ndarray:
     """(K + 1,) [s] the knots of clocks fitted as logged (no coarse alignment): the study's first and last detection
-    ``span`` and every :data:`WINDOW` between, as the coarse alignment's windows (:func:`aligned`). A clock's rate
+    ``span`` and every :data:`WINDOW` between, evenly (the coarse alignment's windows' edges too, :func:`aligned`;
+    a span under a second taken as a second). A clock's rate
     follows its crystal's temperature, which a drift corrected at offload as a line leaves: at 1 ppm a day's swing
     is ±14 ms, 20 m of range (simulated, :func:`~sblsim.orchestrator.telemetry.simulate.simulate_study`'s
     ``wander``)."""
