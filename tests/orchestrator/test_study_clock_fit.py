@@ -18,13 +18,13 @@ DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 
 
 def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = False, receivers: int = 9,
-           moved: float = 0.0, days: float = 0.25, wander: float = 0.0):
+           moved: float = 0.0, days: float = 0.25, wander: float = 0.0, survey_seed: int = 99):
     """A simulated GLATOS study (``receivers``, 3 animals, ``days``, the clocks' ``wander`` [s] about their lines)
     whose sync tags are never heard (``unheard``: their rows dropped from the detections) or never named (the
     deployments' ``transmitter`` emptied), with ``depths`` its deployments' ``instrument_depth`` (5 m: the tags' too,
     the simulation being in one plane) and ``bottom_depth`` (20 to 36 m), each deployment's position off by
-    ``moved`` [m per axis, σ] (its survey's error), run through the CLI; the simulation, the study's folder and its
-    ``study.json``."""
+    ``moved`` [m per axis, σ] (its survey's error, drawn with ``survey_seed``), run through the CLI; the simulation,
+    the study's folder and its ``study.json``."""
     from sblsim.orchestrator import cli
 
     sim = simulate_study(n_receivers=receivers, n_tags=3, days=days, redeployed=0, seed=5, offset=offset,
@@ -38,7 +38,7 @@ def _study(tmp_path, offset: float, drift: float, unheard: bool, depths: bool = 
     if depths:
         sheet = sheet.assign(instrument_depth=5.0, bottom_depth=20.0 + 2.0 * np.arange(len(sheet)))
     if moved:
-        north, east = np.random.default_rng(99).normal(0.0, moved, (2, len(sheet)))
+        north, east = np.random.default_rng(survey_seed).normal(0.0, moved, (2, len(sheet)))
         sheet["deploy_lat"] = (sheet["deploy_lat"].astype(float) + north / 111_320.0).map("{:.10f}".format)
         sheet["deploy_long"] = (sheet["deploy_long"].astype(float) + east / (
             111_320.0 * np.cos(np.radians(sheet["deploy_lat"].astype(float))))).map("{:.10f}".format)
@@ -104,15 +104,18 @@ def test_clocks_that_are_right_are_checked_and_kept_as_logged(tmp_path, capsys):
     assert errors.groupby("tag")["error"].median().max() < 0.5
 
 
-def test_pings_the_fitted_clocks_leave_misfit_are_said_to_exceed_the_tracks_sigma(tmp_path, capsys):
-    """The deployments' positions off by 2 m per axis (σ) and no survey error stated, clocks ±20 ms: the fit takes
-    the clocks (the tracks a median 1-2.3 m off, as the sync tags' study of the same positions, 1.5-1.6 m), but the
-    pings left out keep a χ² per degree of freedom above 4 at the timing noise taken, and the tracks' σ do not hold
-    their error (NEES 64-161): said in one warning naming what to state."""
-    from sblsim.orchestrator.telemetry.study_offsets import FITTED, MISFIT
+@pytest.mark.parametrize("survey_seed", [99, 104])
+def test_pings_the_fitted_clocks_leave_misfit_are_said_to_exceed_the_tracks_sigma(tmp_path, capsys, survey_seed):
+    """The deployments' positions off by 2 m per axis (σ) and no survey error stated, clocks ±20 ms, two draws of
+    the survey's error: the fit takes the clocks (the tracks a median 1-2.3 m off, as the sync tags' study of the
+    same positions, 1.5-1.6 m), but their σ do not hold their error (NEES in the hundreds), and the pings left out
+    misfit the clocks at the timing noise taken: said in one warning naming what to state. The second draw's
+    misfit (a χ² per degree of freedom of 3.98) was under the first threshold, 4: nothing was said."""
+    from sblsim.orchestrator.telemetry.study_offsets import FITTED
 
-    _, _, study = _study(tmp_path, 0.02, 0.0, unheard=False, moved=2.0)
-    assert study["clocks"]["source"] == FITTED and study["clocks"]["held_out"]["fitted_chi2_per_dof"] > MISFIT
+    sim, out, study = _study(tmp_path, 0.02, 0.0, unheard=False, moved=2.0, survey_seed=survey_seed)
+    assert study["clocks"]["source"] == FITTED
+    assert _errors(sim, out, study["clocks"]["reference_receiver"])["nees"].mean() > 20  # (the warning is owed)
     warning = [line for line in capsys.readouterr().err.splitlines() if "more than the noise explains" in line]
     assert len(warning) == 1 and warning[0].startswith("sblsim: warning: the moving tags' pings left out fit the "
                                                        "clocks") and "--survey-sigma M" in warning[0], warning
@@ -128,7 +131,7 @@ def _offsets_agree(sim, clocks: dict, within: float) -> None:
         assert np.abs(np.array(knots) - (truth[name] - truth[reference])).max() < within, (name, knots, truth[name])
 
 
-def test_a_clock_that_wanders_about_its_line_is_followed_a_knot_every_window(tmp_path):
+def test_a_clock_that_wanders_about_its_line_is_followed_a_knot_every_window(tmp_path, capsys):
     """A day, each clock off by up to ±10 ms and drifting by 0.1 ppm (within the time the sound crosses the array: no
     coarse alignment), and wandering about that line by up to ±10 ms over one to three days (a crystal's rate
     following the water's temperature). Fitted at the study's ends alone (a line), the clocks were off by up to 7 ms
@@ -147,6 +150,7 @@ def test_a_clock_that_wanders_about_its_line_is_followed_a_knot_every_window(tmp
     for tag, rows in errors.groupby("tag"):
         assert rows["error"].median() < 0.5 and 1.0 <= rows["nees"].mean() <= 4.0, (tag, rows.describe())
         assert (rows["quality"] == "flagged").mean() < 0.05, tag
+    assert "more than the noise explains" not in capsys.readouterr().err  # (the knots fit the pings: no misfit)
 
 
 def test_a_knot_every_window_between_the_study_s_ends():
