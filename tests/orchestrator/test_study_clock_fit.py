@@ -119,6 +119,7 @@ def test_pings_the_fitted_clocks_leave_misfit_are_said_to_exceed_the_tracks_sigm
     warning = [line for line in capsys.readouterr().err.splitlines() if "more than the noise explains" in line]
     assert len(warning) == 1 and warning[0].startswith("sblsim: warning: the moving tags' pings left out fit the "
                                                        "clocks") and "--survey-sigma M" in warning[0], warning
+    assert "more than the noise explains" in (out / "report.html").read_text()  # (the page's warnings too)
 
 
 def _offsets_agree(sim, clocks: dict, within: float) -> None:

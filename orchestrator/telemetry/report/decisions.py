@@ -18,7 +18,7 @@ from sblsim.orchestrator.io.frames import CHOSEN_GIVEN, CHOSEN_UTM
 from sblsim.orchestrator.telemetry.report.figures_study import summary_value
 from sblsim.orchestrator.telemetry.report.folder import StudyFolder
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, UNHEARD
-from sblsim.orchestrator.telemetry.study_offsets import FITTED
+from sblsim.orchestrator.telemetry.study_offsets import FITTED, misfit
 from sblsim.orchestrator.telemetry.study_positions import lines as position_lines
 from sblsim.orchestrator.telemetry.study_report import reference_lines, tag_lines
 
@@ -36,8 +36,9 @@ def _text(value: Any) -> str:
 
 def warnings(study: StudyFolder) -> list[dict[str, str]]:
     """Every warning of the study, each as ``source`` (where it was said) and ``text``: ``study.json``'s notes (the
-    console's ``note:`` lines), the receivers file's notes, the receivers not synchronised, a refinement of the
-    positions not taken, and each tag's warning line as the console printed it."""
+    console's ``note:`` lines), the receivers file's notes, the receivers not synchronised, the clocks' fit's misfit
+    (:func:`~sblsim.orchestrator.telemetry.study_offsets.misfit`), a refinement of the positions not taken, and each
+    tag's warning line as the console printed it."""
     s = study.summary
     out = [{"source": "study", "text": _text(note)} for note in (s.get("notes") or [])]
     out += [{"source": "receivers file", "text": _text(note)}
@@ -57,6 +58,12 @@ def warnings(study: StudyFolder) -> list[dict[str, str]]:
     if missing:
         out.append({"source": "clocks", "text": f"not synchronised: {', '.join(map(str, missing))} (their detections "
                                                 "are not positioned)"})
+    try:  # the clocks' fit from the tags' pings leaving more than the noise (as the console warned)
+        unheld = misfit(s)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        unheld = None
+    if unheld:
+        out.append({"source": "clocks", "text": unheld})
     tags = study.tags
     if set(LINE_COLUMNS) <= set(tags.columns):
         table = tags.assign(**{c: tags[c].fillna("").astype(str) for c in tags if tags[c].dtype == object})
