@@ -12,9 +12,10 @@ So, the tags' matrices made and none tracked:
    detections of the same tags), they are aligned from those lags (:func:`aligned`,
    :mod:`~sblsim.models.sync.coarse_lags`), to within that time;
 2. each receiver's offset from the clocks the matrices were made on, linear in time between knots (the study's first
-   and last detection and every :data:`WINDOW` between, :func:`knot_times`, or the coarse alignment's windows), is
-   fitted with the moving tags' pings' places and emission times, each ping from its own fix (in 3-D at the depth its
-   tracker takes: :func:`held_heights`) (:func:`fit_clocks`;
+   and last detection and every :data:`~sblsim.models.sync.knots.WINDOW` between, or the coarse alignment's windows,
+   :mod:`~sblsim.models.sync.knots`; a stretch of too few pings one), is fitted with the moving tags' pings'
+   places and emission times, each ping from its own fix (in 3-D at the depth its tracker takes:
+   :func:`held_heights`) (:func:`fit_clocks`;
    :func:`~sblsim.models.tracking.receiver_positions.refine_receivers`: each offset a range bias with a broad prior,
    the positions held at the survey's, a ping heard by four receivers or more, the sound speed's scale fitted with
    them where none is given), one receiver's clock the time base (an offset common to every clock moves no
@@ -43,11 +44,11 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
+from sblsim.models.sync.knots import WINDOW, knot_counts, knot_times, merged  # noqa: F401 (WINDOW: said here)
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
-from sblsim.models.tracking.refinement_terms import Unknowns
 from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
@@ -69,10 +70,10 @@ HELD_SIGMA, BASE_SIGMA = 0.01, 1e-7
 #: The prior σ [1] of the sound speed's scale fitted with the clocks where the study gives none (5 % of
 #: :data:`~sblsim.models.tracking.sound_speed.DEFAULT_SOUND_SPEED`: 75 m/s, fresh to salt water).
 SPEED_PRIOR = 0.05
-#: The slowest sound speed [m/s] and a margin [s] of the time the sound takes across the array, the largest lag [s]
-#: between two clocks looked for, and the windows [s] of a coarse alignment (:func:`aligned`: a clock drifting by
-#: 20 ppm moves by 0.2 s in one), the longest span between the fine fit's knots too (:func:`knot_times`).
-SLOWEST, CROSSING_MARGIN, MAX_LAG, WINDOW = 1400.0, 0.05, 120.0, 3 * 3600.0
+#: The slowest sound speed [m/s] and a margin [s] of the time the sound takes across the array, and the largest lag [s]
+#: between two clocks looked for (a coarse alignment's windows, and the fine fit's knots, are
+#: :data:`~sblsim.models.sync.knots.WINDOW` apart).
+SLOWEST, CROSSING_MARGIN, MAX_LAG = 1400.0, 0.05, 120.0
 #: The most pings fitted (heard by four receivers or more; a season's spread evenly in time): 20,000 pings of 20
 #: receivers tie each clock to a few microseconds, and a fit's cost is linear in them.
 MAX_PINGS = 20_000
@@ -114,10 +115,10 @@ def aligned(clocks: Clocks, info: dict[str, Any], assigned, table) -> tuple[Cloc
     """Clocks taken as logged (``clocks``, ``info`` their summary: :func:`fits`) aligned coarsely from the tags the
     receivers hear together where two of them disagree by more than the time the sound takes across the array
     (:func:`~sblsim.models.sync.coarse_lags.coarse_offsets`: each pair's lag where its detections' differences pile
-    up, the receivers' offsets by least squares in windows of :data:`WINDOW` s, the receiver with the most detections
-    the time base), the start of the fine fit (:func:`fit_clocks`); else as they are. A receiver no pair ties to the
-    time base is left out (not synchronised). ``assigned`` the detections at their deployments, ``table`` the
-    receivers (``receiver``, ``x``, ``y``, ``sync_tag``)."""
+    up, the receivers' offsets by least squares in windows of :data:`~sblsim.models.sync.knots.WINDOW` s, the
+    receiver with the most detections the time base), the start of the fine fit (:func:`fit_clocks`); else as they
+    are. A receiver no pair ties to the time base is left out (not synchronised). ``assigned`` the detections at
+    their deployments, ``table`` the receivers (``receiver``, ``x``, ``y``, ``sync_tag``)."""
     if not fits(info["source"]):
         return clocks, info
     names = [str(n) for n in table["receiver"]]
@@ -163,7 +164,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
         tracker).
     span : tuple of float
         [s since 1970 UTC] the study's first and last detection: the clocks' first and last knots
-        (:func:`knot_times`: a knot every :data:`WINDOW` between).
+        (:func:`~sblsim.models.sync.knots.knot_times`: a knot every :data:`~sblsim.models.sync.knots.WINDOW`
+        between, :func:`~sblsim.models.sync.knots.merged` where the pings are few).
     on : Clocks, optional
         The clocks the study was made on (a coarse alignment's or an earlier round's fit, with their knots): the
         offsets fitted are added to theirs. None: as logged.
@@ -217,7 +219,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
-    edges = knot_times(span) if on is None else on.edges
+    grid = knot_times(span) if on is None else on.edges
+    edges = merged(grid, times)  # (the grid's knots between which the pings fitted are enough to fit a clock)
     near = knot_counts(np.isfinite(toa), times, edges)  # (R, K + 1) the arrivals touching each knot
     base = int(np.argmax(np.isfinite(toa).sum(axis=0)))
     # the time base: the receiver heard most in the pings fitted; at a knot its arrivals do not reach (no
@@ -236,28 +239,35 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     # [s]: a range bias is its clock's offset; its σ the median over the knots its arrivals touch (a knot at a
     # stretch it hears little; a deployment's knots outside its own time tied by the prior alone)
     mine = (near > 0) | (near == 0).all(axis=1, keepdims=True)
-    knots = fit.bias / fitted
     spread = np.array([np.median(s[m]) for s, m in zip(fit.bias_sigma, mine)]) / fitted
     taken = (fit.arrivals > 0) & (spread <= LOOSE_SIGMA)  # (one tied more loosely than MAX_CLOCK_SIGMA: :func:`tied`)
     taken[bases] = True
-    if on is not None:  # the corrections added to the clocks the study was made on (its receivers alone)
+    # each clock at the grid's knots: the offset fitted, linear between the fit's knots, added to the clocks the study
+    # was made on (their receivers alone); less the time base's at each of the fit's knots (linear between them: an
+    # offset common to every clock moves no position)
+    knots = np.array([np.interp(grid, edges, k) for k in fit.bias / fitted])
+    if on is not None:
         taken &= np.isin(names, on.receivers)
-        knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else np.zeros(len(edges))
+        knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else np.zeros(len(grid))
                                   for n in names])
-    knots -= knots[bases, np.arange(len(edges))]
+    at = np.array([np.interp(edges, grid, k) for k in knots])  # (R, K + 1) at the fit's knots
+    common = at[bases, np.arange(len(edges))]
+    knots, at = knots - np.interp(grid, edges, common), at - common
     kept = np.flatnonzero(taken)
-    clocks = Clocks([names[k] for k in kept], edges, knots[kept], clock_sigma=np.where(kept == base, 0.0,
-                                                                                       spread[kept]))
-    reach = np.where(mine, np.abs(knots), 0.0)  # (the knots a deployment's own arrivals touch)
+    clocks = Clocks([names[k] for k in kept], grid, knots[kept], clock_sigma=np.where(kept == base, 0.0,
+                                                                                      spread[kept]))
+    reach = np.where(mine, np.abs(at), 0.0)  # (the knots a deployment's own arrivals touch)
     largest = kept[int(np.argmax(reach[kept].max(axis=1)))]
     summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
                "not_synchronised": [n for n, t in zip(names, taken) if not t] + unreached, "tags": [
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(reach[largest].max()), "largest_offset_receiver": names[largest],
-               "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": edges.tolist(),
+               "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": grid.tolist(),
+               "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(edges, times),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
                "sound_speed_m_s": fitted,
-               "time_base_by_knot": [names[b] for b in bases] if (bases != base).any() else None,
+               "time_base_by_knot": [names[b] for b in bases[np.abs(grid[:, None] - edges).argmin(axis=1)]]
+               if (bases != base).any() else None,
                "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
                             "pings": check.pings, "folds": check.folds.tolist(), "helps": check.helps,
                             "rule": f"the fitted clocks' median chi2 per degree of freedom of the pings left out at "
@@ -267,26 +277,13 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     return ClockFit(clocks, summary, check.helps)
 
 
-def knot_times(span: tuple[float, float]) -> np.ndarray:
-    """(K + 1,) [s] the knots of clocks fitted as logged (no coarse alignment): the study's first and last detection
-    ``span`` and every :data:`WINDOW` between, evenly (the coarse alignment's windows' edges too, :func:`aligned`;
-    a span under a second taken as a second). A clock's rate
-    follows its crystal's temperature, which a drift corrected at offload as a line leaves: at 1 ppm a day's swing
-    is ±14 ms, 20 m of range (simulated, :func:`~sblsim.orchestrator.telemetry.simulate.simulate_study`'s
-    ``wander``)."""
-    end = max(span[1], span[0] + 1.0)
-    return np.linspace(span[0], end, max(int(np.ceil((end - span[0]) / WINDOW)), 1) + 1)
-
-
-def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """(R, K + 1) each receiver's arrivals touching each knot at ``edges`` (K + 1,) [s] (a ping in ``[edges[j],
-    edges[j + 1])`` the knots j and j + 1, its offset linear between them; one beyond the ends the end's; ``heard``
-    (P, R), ``times`` (P,) [s]): a deployment's knots outside its own time are tied by the prior alone."""
-    bins = Unknowns.of(heard.shape[1], True, edges, False).bins(times, len(times))[0]  # (the fit's own)
-    out = np.zeros((len(edges), heard.shape[1]), np.int64)
-    np.add.at(out, bins, heard)
-    np.add.at(out, bins + 1, heard)
-    return out.T
+def sparse_stretches(edges: np.ndarray, times: np.ndarray) -> list[dict[str, Any]]:
+    """The stretches between the fit's knots ``edges`` [s] longer than a window (the pings were too few to tie a
+    clock's offsets in each of its windows: :func:`~sblsim.models.sync.knots.merged`), each its ``start_s``,
+    ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s]): the clocks are linear across it."""
+    long = np.flatnonzero(np.diff(edges) > 1.5 * WINDOW)
+    return [{"start_s": float(edges[j]), "end_s": float(edges[j + 1]),
+             "pings": int(((times >= edges[j]) & (times < edges[j + 1])).sum())} for j in long]
 
 
 def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,
@@ -396,6 +393,16 @@ def split_reasons(tags: pd.DataFrame, lag: float) -> None:
         f"detections with the sync tags' or --sync DIR")
 
 
+def _sparse(stretches: list[dict[str, Any]]) -> str:
+    """The note's words on the stretches the clocks are linear across (:func:`sparse_stretches`), or none."""
+    if not stretches:
+        return ""
+    hours = [(s["end_s"] - s["start_s"]) / 3600.0 for s in stretches]
+    return (f"; the clocks linear across {len(stretches)} stretch{'es' if len(stretches) > 1 else ''} of too few "
+            f"pings to follow them (the longest {max(hours):.3g} h, {sum(s['pings'] for s in stretches):,} pings "
+            f"fitted in all): a clock's wander there is in no track's σ")
+
+
 def _seconds(value: float) -> str:
     """A duration [s] in milliseconds below a second, else in seconds."""
     return f"{value * 1e3:.3g} ms" if abs(value) < 1.0 else f"{value:.3g} s"
@@ -464,7 +471,7 @@ def note(summary: dict[str, Any]) -> str:
             f"{rounds[0]['chi2_per_dof_before']:.3g})" + (
                 f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
                 f"detections not used: {', '.join(untaken[:12])}{', ...' if len(untaken) > 12 else ''}"
-                if untaken else ""))
+                if untaken else "") + _sparse(summary.get("sparse_stretches") or []))
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",

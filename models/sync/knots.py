@@ -1,0 +1,61 @@
+"""The knots of a receiver's clock fitted from a study's moving tags' pings (no sync tag): every :data:`WINDOW`
+between the study's first and last detection (:func:`knot_times`), those between which the pings fitted are too
+few merged (:func:`merged`), and each receiver's arrivals touching each knot (:func:`knot_counts`); the clock's offset
+is linear between its knots (a study's clocks taken as logged and fitted from its pings). Knots as a spline's: de
+Boor, "A Practical Guide to Splines", Springer, 1978, ch. III (piecewise linear interpolation, its error
+``h² max|f''| / 8`` at a knot spacing ``h``: a wander of ±10 ms over a day, 0.8 ms at 3 h).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sblsim.models.tracking.refinement_terms import Unknowns
+
+#: [s] the longest span between a clock's knots (a coarse alignment's windows too: a clock drifting by 20 ppm moves
+#: by 0.2 s in one).
+WINDOW = 3 * 3600.0
+#: The fewest pings fitted in a stretch between two knots of a clock (:func:`merged`).
+MIN_BIN_PINGS = 30
+
+
+def knot_times(span: tuple[float, float]) -> np.ndarray:
+    """(K + 1,) [s] the knots of clocks fitted as logged (no coarse alignment): the study's first and last detection
+    ``span`` and every :data:`WINDOW` between, evenly (a coarse alignment's windows' edges too; a span under a second
+    taken as a second). A clock's rate follows its crystal's temperature, which a drift corrected at offload as a
+    line leaves: at 1 ppm a day's swing is ±14 ms, 20 m of range."""
+    end = max(span[1], span[0] + 1.0)
+    return np.linspace(span[0], end, max(int(np.ceil((end - span[0]) / WINDOW)), 1) + 1)
+
+
+def merged(grid: np.ndarray, times: np.ndarray, least: int | None = None) -> np.ndarray:
+    """(K + 1,) [s] the knots of ``grid`` (G + 1,) [s] a clock's offset is fitted at, from the pings fitted (their
+    ``times`` (P,) [s], each beyond the grid's ends at its end): a knot between two stretches of fewer than
+    ``least`` pings each (None: :data:`MIN_BIN_PINGS`) dropped (a run of them one stretch, its knots those its
+    neighbours tie), and a first or last stretch of fewer joined to the next (its outer knot tied by nothing else);
+    the grid's ends always kept (fewer pings in all: its ends alone, an offset and a drift). A clock's offsets at
+    two knots that a few pings alone tie trade with those pings' places: the pings of an animal passing once in a
+    day away from the array took offsets 0.2 s off."""
+    least = MIN_BIN_PINGS if least is None else least
+    counts = np.histogram(np.clip(times, grid[0], grid[-1]), grid)[0]
+    keep = np.ones(len(grid), bool)
+    keep[1:-1] = (counts[:-1] >= least) | (counts[1:] >= least)
+    for end in (0, -1):  # (the first stretch, then the last)
+        at = np.flatnonzero(keep)
+        if len(at) > 2 and np.add.reduceat(counts, at[:-1])[end] < least:
+            keep[at[1] if end == 0 else at[-2]] = False
+    return grid[keep]
+
+
+def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(R, K + 1) each receiver's arrivals touching each knot at ``edges`` (K + 1,) [s] (a ping in ``[edges[j],
+    edges[j + 1])`` the knots j and j + 1, its offset linear between them; one beyond the ends the end's; ``heard``
+    (P, R), ``times`` (P,) [s]): a deployment's knots outside its own time are tied by the prior alone."""
+    bins = Unknowns.of(heard.shape[1], True, edges, False).bins(times, len(times))[0]  # (the fit's own)
+    out = np.zeros((len(edges), heard.shape[1]), np.int64)
+    np.add.at(out, bins, heard)
+    np.add.at(out, bins + 1, heard)
+    return out.T
+
+
+__all__ = ["MIN_BIN_PINGS", "WINDOW", "knot_counts", "knot_times", "merged"]
