@@ -13,8 +13,8 @@ DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
 def test_a_study_whose_detections_hold_no_sync_tag_takes_the_clocks_as_logged(tmp_path):
     """The deployments name sync tags the detections do not hold (an OTN or GLATOS extract of a tag project holds its
     own tags alone): the study is made, its clocks taken as logged and said so (the sync tags named), each tag with
-    its reason, where before it was refused whole ("fewer than two detections of the receivers table's sync tags");
-    ``sblsim sync`` on the same files still refuses, in one line, exit 2."""
+    its reason or its track, where before it was refused whole ("fewer than two detections of the receivers table's
+    sync tags"); ``sblsim sync`` on the same files still refuses, in one line, exit 2."""
     import json
 
     from sblsim.orchestrator import cli
@@ -33,7 +33,10 @@ def test_a_study_whose_detections_hold_no_sync_tag_takes_the_clocks_as_logged(tm
     assert len(said) == 1 and "fewer than two detections of the receivers table's sync tags" in said[0], said
     assert str(min(named)) in said[0], said
     tags = pd.read_csv(tmp_path / "study" / "tags.csv", dtype=str, keep_default_na=False)
-    assert tags["transmitter"].tolist() == ["7953"] and tags["reason"].str.len().gt(0).all()
+    # (refused with its reason on the clocks as logged, or tracked on clocks its pings fitted: the lobster's pings
+    # alone tie 7 of the 20 clocks once its sparse hours share their knots, most of its rows flagged)
+    assert tags["transmitter"].tolist() == ["7953"]
+    assert ((tags["status"] == "tracked") | tags["reason"].str.len().gt(0)).all(), tags.T
     assert cli.main(["sync", str(tmp_path / "detections.csv"), "--receivers", str(DATA / "hydrophones.csv"),
                      "--out", str(tmp_path / "sync")]) == 2
     assert not (tmp_path / "sync").exists()
