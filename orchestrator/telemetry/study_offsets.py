@@ -44,7 +44,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
-from sblsim.models.sync.knots import WINDOW, knot_counts, knot_times, merged  # noqa: F401 (WINDOW: said here)
+from sblsim.models.sync.knots import knot_counts, knot_times, merged
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
@@ -263,7 +263,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(reach[largest].max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": grid.tolist(),
-               "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(edges, times),
+               "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(edges, grid, times),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
                "sound_speed_m_s": fitted,
                "time_base_by_knot": [names[b] for b in bases[np.abs(grid[:, None] - edges).argmin(axis=1)]]
@@ -277,11 +277,12 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     return ClockFit(clocks, summary, check.helps)
 
 
-def sparse_stretches(edges: np.ndarray, times: np.ndarray) -> list[dict[str, Any]]:
-    """The stretches between the fit's knots ``edges`` [s] longer than a window (the pings were too few to tie a
-    clock's offsets in each of its windows: :func:`~sblsim.models.sync.knots.merged`), each its ``start_s``,
-    ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s]): the clocks are linear across it."""
-    long = np.flatnonzero(np.diff(edges) > 1.5 * WINDOW)
+def sparse_stretches(edges: np.ndarray, grid: np.ndarray, times: np.ndarray) -> list[dict[str, Any]]:
+    """The stretches between the fit's knots ``edges`` [s] that span more than one of the ``grid``'s windows (the
+    pings were too few to tie a clock's offsets in each: :func:`~sblsim.models.sync.knots.merged`), each its
+    ``start_s``, ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s]): the clocks are linear
+    across it."""
+    long = np.flatnonzero(np.diff(np.searchsorted(grid, edges)) > 1)
     return [{"start_s": float(edges[j]), "end_s": float(edges[j + 1]),
              "pings": int(((times >= edges[j]) & (times < edges[j + 1])).sum())} for j in long]
 

@@ -199,6 +199,20 @@ def test_a_clock_is_not_fitted_where_the_pings_are_too_few_to_tie_it(tmp_path, c
     assert "the clocks linear across 1 stretch of too few pings to follow them (the longest 12 h" in said.out + said.err
 
 
+def test_the_stretches_said_are_those_the_knots_were_merged_across():
+    """``clocks.sparse_stretches``: each stretch between the fit's knots spanning more than one window of the grid,
+    with the pings fitted in it (a day away with two pings; none where every window holds enough)."""
+    from sblsim.models.sync.knots import MIN_BIN_PINGS, WINDOW, merged
+    from sblsim.orchestrator.telemetry.study_offsets import sparse_stretches
+
+    grid = np.arange(11) * WINDOW + 1.7e9
+    counts = [MIN_BIN_PINGS, MIN_BIN_PINGS, 0, 0, 0, 2, 0, 0, MIN_BIN_PINGS, MIN_BIN_PINGS]
+    times = np.concatenate([np.linspace(grid[j] + 1.0, grid[j + 1] - 1.0, n) for j, n in enumerate(counts)])
+    assert sparse_stretches(merged(grid, times), grid, times) == [{"start_s": grid[2], "end_s": grid[8], "pings": 2}]
+    dense = np.linspace(grid[0], grid[-1], 10 * MIN_BIN_PINGS)
+    assert sparse_stretches(merged(grid, dense), grid, dense) == []
+
+
 def test_clocks_off_by_seconds_are_aligned_from_the_tags_detections_then_fitted(tmp_path):
     """Each clock off by up to ±2 s and drifting by up to 20 ppm (a receiver's raw clock: half a second over the six
     hours), no sync tag named: a ping's arrivals are seconds apart and the tags were refused as logged (their
