@@ -113,7 +113,7 @@ def test_clocks_that_are_right_are_checked_and_kept_as_logged(tmp_path, capsys):
     assert errors.groupby("tag")["error"].median().max() < 0.5
 
 
-@pytest.mark.parametrize("survey_seed", [99, 104])
+@pytest.mark.parametrize("survey_seed", [pytest.param(99, marks=pytest.mark.slow), 104])
 def test_pings_the_fitted_clocks_leave_misfit_are_said_to_exceed_the_tracks_sigma(tmp_path, capsys, survey_seed):
     """The deployments' positions off by 2 m per axis (σ) and no survey error stated, clocks ±20 ms, two draws of
     the survey's error: the fit takes the clocks (the tracks a median 1-2.3 m off, as the sync tags' study of the
