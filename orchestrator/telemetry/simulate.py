@@ -87,12 +87,15 @@ class SimulatedStudy:
     def offset(self, deployment: int, tau: np.ndarray) -> np.ndarray:
         """[s] deployment ``deployment``'s clock's offset at the true times ``tau`` [s from the start]:
         ``a + b τ + w sin(2π τ / T + φ)`` (the module docstring)."""
-        return _offset(self.clocks, np.full(np.shape(tau), deployment), np.asarray(tau, float))
+        a, b = self.clocks.loc[deployment, ["a", "b"]]
+        return a + b * tau + _wander(self.clocks, np.full(np.shape(tau), deployment), np.asarray(tau, float))
 
     def clock_time(self, deployment: int, tau: np.ndarray) -> np.ndarray:
         """[s since 1970 UTC] deployment ``deployment``'s clock reading at the true times ``tau`` [s from the
-        start]."""
-        return self.origin + tau + self.offset(deployment, tau)
+        start] (summed in the order a study without wander always was: the same times to the bit)."""
+        a, b = self.clocks.loc[deployment, ["a", "b"]]
+        return self.origin + tau + a + b * tau + _wander(self.clocks, np.full(np.shape(tau), deployment),
+                                                         np.asarray(tau, float))
 
     def truth_at(self, tag: str, epoch: np.ndarray, deployment: int) -> np.ndarray:
         """(n, 2) [m in the frame] animal ``tag``'s true position at the times ``epoch`` (n,) [s since 1970 UTC]
@@ -361,7 +364,7 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     arrivals = pd.concat(parts, ignore_index=True)
     j = arrivals["deployment"].to_numpy()
     tau = arrivals["tau"].to_numpy()
-    clock = origin + tau + _offset(clocks, j, tau)
+    clock = origin + tau + clocks["a"].to_numpy()[j] + clocks["b"].to_numpy()[j] * tau + _wander(clocks, j, tau)
     detections = pd.DataFrame({"serial": clocks["serial"].to_numpy()[j], "model": "VR2AR",
                                "transmitter": arrivals["transmitter"].to_numpy(), "time": clock})
     detections = detections.sort_values(["serial", "time"], kind="stable").reset_index(drop=True)
@@ -369,13 +372,13 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
                           positions)
 
 
-def _offset(clocks: pd.DataFrame, deployment: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """[s] each deployment's clock's offset (``clocks``' row ``deployment`` (n,)) at the true times ``tau`` (n,) [s]."""
-    out = clocks["a"].to_numpy()[deployment] + clocks["b"].to_numpy()[deployment] * tau
-    if "w" in clocks:
-        w, period, phase = (clocks[k].to_numpy()[deployment] for k in ("w", "period", "phase"))
-        out = out + w * np.sin(2 * np.pi * tau / period + phase)
-    return out
+def _wander(clocks: pd.DataFrame, deployment: np.ndarray, tau: np.ndarray) -> np.ndarray | float:
+    """[s] each deployment's clock's wander about its line (``clocks``' row ``deployment`` (n,)) at the true times
+    ``tau`` (n,) [s]; 0 where none was simulated (added, it changes no time)."""
+    if "w" not in clocks:
+        return 0.0
+    w, period, phase = (clocks[k].to_numpy()[deployment] for k in ("w", "period", "phase"))
+    return w * np.sin(2 * np.pi * tau / period + phase)
 
 
 __all__ = ["SimulatedStudy", "fathom_text", "glatos_text", "simulate_study", "vue_text"]
