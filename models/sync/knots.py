@@ -37,7 +37,7 @@ def merged(grid: np.ndarray, times: np.ndarray, least: int | None = None) -> np.
     two knots that a few pings alone tie trade with those pings' places: the pings of an animal passing once in a
     day away from the array took offsets 0.2 s off."""
     least = MIN_BIN_PINGS if least is None else least
-    counts = np.histogram(np.clip(times, grid[0], grid[-1]), grid)[0]
+    counts = stretch_counts(grid, times)
     keep = np.ones(len(grid), bool)
     keep[1:-1] = (counts[:-1] >= least) | (counts[1:] >= least)
     for end in (0, -1):  # (the first stretch, then the last)
@@ -45,6 +45,12 @@ def merged(grid: np.ndarray, times: np.ndarray, least: int | None = None) -> np.
         if len(at) > 2 and np.add.reduceat(counts, at[:-1])[end] < least:
             keep[at[1] if end == 0 else at[-2]] = False
     return grid[keep]
+
+
+def stretch_counts(edges: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """(K,) the pings (their ``times`` (P,) [s]) in each stretch between the knots ``edges`` (K + 1,) [s], one beyond
+    the ends in the end's stretch (its offset the end's), the last stretch closed at its end."""
+    return np.histogram(np.clip(times, edges[0], edges[-1]), edges)[0]
 
 
 def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -58,4 +64,4 @@ def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.n
     return out.T
 
 
-__all__ = ["MIN_BIN_PINGS", "WINDOW", "knot_counts", "knot_times", "merged"]
+__all__ = ["MIN_BIN_PINGS", "WINDOW", "knot_counts", "knot_times", "merged", "stretch_counts"]

@@ -44,7 +44,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
-from sblsim.models.sync.knots import knot_counts, knot_times, merged
+from sblsim.models.sync.knots import knot_counts, knot_times, merged, stretch_counts
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
@@ -250,7 +250,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
         taken &= np.isin(names, on.receivers)
         knots = knots + np.array([on.knots[on.receivers.index(n)] if n in on.receivers else np.zeros(len(grid))
                                   for n in names])
-    at = np.array([np.interp(edges, grid, k) for k in knots])  # (R, K + 1) at the fit's knots
+    at = knots[:, np.searchsorted(grid, edges)]  # (R, K + 1) at the fit's knots (the grid's own: merged keeps them)
     common = at[bases, np.arange(len(edges))]
     knots, at = knots - np.interp(grid, edges, common), at - common
     kept = np.flatnonzero(taken)
@@ -280,11 +280,11 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
 def sparse_stretches(edges: np.ndarray, grid: np.ndarray, times: np.ndarray) -> list[dict[str, Any]]:
     """The stretches between the fit's knots ``edges`` [s] that span more than one of the ``grid``'s windows (the
     pings were too few to tie a clock's offsets in each: :func:`~sblsim.models.sync.knots.merged`), each its
-    ``start_s``, ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s]): the clocks are linear
-    across it."""
+    ``start_s``, ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s], counted as
+    :func:`~sblsim.models.sync.knots.merged` counts them): the clocks are linear across it."""
     long = np.flatnonzero(np.diff(np.searchsorted(grid, edges)) > 1)
-    return [{"start_s": float(edges[j]), "end_s": float(edges[j + 1]),
-             "pings": int(((times >= edges[j]) & (times < edges[j + 1])).sum())} for j in long]
+    counts = stretch_counts(edges, times)
+    return [{"start_s": float(edges[j]), "end_s": float(edges[j + 1]), "pings": int(counts[j])} for j in long]
 
 
 def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,
