@@ -1,6 +1,7 @@
 """The knots of a receiver's clock fitted from a study's moving tags' pings (no sync tag): every :data:`WINDOW`
 between the study's first and last detection (:func:`knot_times`), those between which the pings fitted are too
-few merged (:func:`merged`), and each receiver's arrivals touching each knot (:func:`knot_counts`); the clock's offset
+few merged (:func:`merged`), each receiver's arrivals touching each knot (:func:`knot_counts`), and how far the
+clocks depart from a line over a stretch's length where the pings tie them (:func:`departure`); the clock's offset
 is linear between its knots (a study's clocks taken as logged and fitted from its pings). Knots as a spline's: de
 Boor, "A Practical Guide to Splines", Springer, 1978, ch. III (piecewise linear interpolation, its error
 ``h² max|f''| / 8`` at a knot spacing ``h``: a wander of ±10 ms over a day, 0.8 ms at 3 h).
@@ -64,4 +65,31 @@ def knot_counts(heard: np.ndarray, times: np.ndarray, edges: np.ndarray) -> np.n
     return out.T
 
 
-__all__ = ["MIN_BIN_PINGS", "WINDOW", "knot_counts", "knot_times", "merged", "stretch_counts"]
+def departure(edges: np.ndarray, offsets: np.ndarray, tied: np.ndarray, length: float,
+              sigma: np.ndarray | None = None) -> float:
+    """[s] the RMS of the clocks' departures from their chords of ``length`` [s]: each clock's offset at each of its
+    knots ``t`` less the mean of its offsets at ``t ± length / 2``, over every knot whose chord lies within the knots
+    the clock is tied at; the error at its middle of a clock taken as linear across a stretch of that ``length``
+    (piecewise linear interpolation: de Boor, ch. III), seen where the pings tie the clocks. ``edges`` (K + 1,) [s]
+    the knots, ``offsets`` (R, K + 1) [s] each clock's offset at them (linear between), ``tied`` (R, K + 1) bool the
+    knots each clock's own arrivals touch (:func:`knot_counts`), ``sigma`` (R, K + 1) [s] the offsets' σ (None:
+    exact): the departures' mean square less what that noise alone gives (each chord's three offsets taken
+    independent; 0 where the noise explains it all). NaN where no chord fits (no knot of a clock as far as half the
+    ``length`` from both ends of its tied knots: how the clocks bend over such a length is not seen)."""
+    half, parts, noise = 0.5 * length, [], []
+    sigma = np.zeros_like(offsets) if sigma is None else sigma
+    for x, m, s in zip(offsets, tied, sigma):
+        t, v, var = edges[m], x[m], s[m] ** 2
+        if len(t) < 2:
+            continue
+        centre = t[(t - half >= t[0] - 1e-6 * half) & (t + half <= t[-1] + 1e-6 * half)]  # (round-off's margin)
+        ends = [np.interp(centre + side, t, v) for side in (-half, half)]
+        parts.append(np.interp(centre, t, v) - 0.5 * (ends[0] + ends[1]))
+        noise.append(np.interp(centre, t, var) + 0.25 * (np.interp(centre - half, t, var) +
+                                                         np.interp(centre + half, t, var)))
+    gone = np.concatenate(parts) if parts else np.array([])
+    return float(np.sqrt(max(np.mean(gone ** 2) - np.mean(np.concatenate(noise)), 0.0))) if len(gone) else \
+        float("nan")
+
+
+__all__ = ["MIN_BIN_PINGS", "WINDOW", "departure", "knot_counts", "knot_times", "merged", "stretch_counts"]

@@ -44,7 +44,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
-from sblsim.models.sync.knots import knot_counts, knot_times, merged, stretch_counts
+from sblsim.models.sync.knots import knot_counts, knot_times, merged
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
@@ -52,6 +52,7 @@ from sblsim.models.tracking.receiver_positions import refine_receivers
 from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
+from sblsim.orchestrator.telemetry.clock_stretches import sparse_stretches, stretches_said
 from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, UNHEARD
 from sblsim.orchestrator.telemetry.study_positions import pooled
 from sblsim.orchestrator.tracks.depth import undetermined_depth
@@ -263,7 +264,9 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                    outcome.matrices[f].summary["tag"] for f in moving], "pings": int(fit.pings),
                "largest_offset_s": float(reach[largest].max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": grid.tolist(),
-               "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(edges, grid, times),
+               "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(
+                   edges, grid, times, at[kept[kept != base]], mine[kept[kept != base]],
+                   fit.bias_sigma[kept[kept != base]] / fitted, sigma),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
                "sound_speed_m_s": fitted,
                "time_base_by_knot": [names[b] for b in bases[np.abs(grid[:, None] - edges).argmin(axis=1)]]
@@ -277,14 +280,14 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     return ClockFit(clocks, summary, check.helps)
 
 
-def sparse_stretches(edges: np.ndarray, grid: np.ndarray, times: np.ndarray) -> list[dict[str, Any]]:
-    """The stretches between the fit's knots ``edges`` [s] that span more than one of the ``grid``'s windows (the
-    pings were too few to tie a clock's offsets in each: :func:`~sblsim.models.sync.knots.merged`), each its
-    ``start_s``, ``end_s`` [s since 1970 UTC] and the pings fitted in it (``times`` [s], counted as
-    :func:`~sblsim.models.sync.knots.merged` counts them): the clocks are linear across it."""
-    long = np.flatnonzero(np.diff(np.searchsorted(grid, edges)) > 1)
-    counts = stretch_counts(edges, times)
-    return [{"start_s": float(edges[j]), "end_s": float(edges[j + 1]), "pings": int(counts[j])} for j in long]
+def interpolated(info: dict[str, Any]) -> list[tuple[float, float]]:
+    """The stretches [s since 1970 UTC] (start, end) across which clocks fitted from the tags' pings (``info``:
+    ``study.json``'s ``clocks``) are linear and bend, seen elsewhere, more than the timing noise
+    (:func:`~sblsim.orchestrator.telemetry.clock_stretches.sparse_stretches`): a moving tag's rows in them are
+    flagged ``clocks_interpolated`` (the tracker's option of that name); none where the clocks are not so fitted."""
+    if info.get("source") != FITTED:
+        return []
+    return [(s["start_s"], s["end_s"]) for s in info.get("sparse_stretches") or [] if s.get("rows_flagged")]
 
 
 def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,
@@ -394,16 +397,6 @@ def split_reasons(tags: pd.DataFrame, lag: float) -> None:
         f"detections with the sync tags' or --sync DIR")
 
 
-def _sparse(stretches: list[dict[str, Any]]) -> str:
-    """The note's words on the stretches the clocks are linear across (:func:`sparse_stretches`), or none."""
-    if not stretches:
-        return ""
-    hours = [(s["end_s"] - s["start_s"]) / 3600.0 for s in stretches]
-    return (f"; the clocks linear across {len(stretches)} stretch{'es' if len(stretches) > 1 else ''} of too few "
-            f"pings to follow them (the longest {max(hours):.3g} h, {sum(s['pings'] for s in stretches):,} pings "
-            f"fitted in all): a clock's wander there is in no track's σ")
-
-
 def _seconds(value: float) -> str:
     """A duration [s] in milliseconds below a second, else in seconds."""
     return f"{value * 1e3:.3g} ms" if abs(value) < 1.0 else f"{value:.3g} s"
@@ -472,8 +465,8 @@ def note(summary: dict[str, Any]) -> str:
             f"{rounds[0]['chi2_per_dof_before']:.3g})" + (
                 f"; not synchronised (no ping heard with three others ties its clock, or too loosely), its "
                 f"detections not used: {', '.join(untaken[:12])}{', ...' if len(untaken) > 12 else ''}"
-                if untaken else "") + _sparse(summary.get("sparse_stretches") or []))
+                if untaken else "") + stretches_said(summary.get("sparse_stretches") or []))
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "held_heights", "misfit", "note", "said", "split_reasons"]
+           "fitted_study", "held_heights", "interpolated", "misfit", "note", "said", "split_reasons"]

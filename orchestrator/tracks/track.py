@@ -19,12 +19,9 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 import numpy as np
-
-if TYPE_CHECKING:
-    import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.tracking import quality as qa
@@ -48,6 +45,7 @@ from sblsim.orchestrator.tracks.depth import (
     undetermined_depth,
 )
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
+from sblsim.orchestrator.tracks.row_flags import flag_interpolated, reason_counts, with_reason
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
@@ -60,18 +58,6 @@ from sblsim.orchestrator.tracks.tracker import (
     tracker_settings,
 )
 from sblsim.orchestrator.tracks.two_tags import _one_tag, at_second_place, second_place
-
-
-def _with_reason(reason: pd.Series, name: str) -> pd.Series:
-    """A quality reason added to each row's (``;`` between: :func:`sblsim.models.tracking.quality.reasons`)."""
-    return reason.where(reason == "", reason + ";") + name
-
-
-def _reason_counts(reason: pd.Series) -> dict[str, int]:
-    """The rows each quality reason holds for, most first (a row of several counted under each)."""
-    named = reason[reason != ""].str.split(";").explode()
-    return {str(k): int(v) for k, v in named.value_counts().items()}
-
 
 #: The motion models of ``--motion``: a moving tag (the filters and smoothers), or a stationary one (one position for
 #: all pings, :func:`~sblsim.models.tracking.still_tag.still_tag`).
@@ -96,8 +82,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           survey_sigma: float | None = None, crs: str | None = None, frame: str | None = None,
           time_origin: float | None = None, other_filters: bool = True, toa_sigma: float | None = None,
           temperature_path: Path | None = None, water_depth: float | None = None,
-          force_interval: bool = False, survey_covariance: tuple[Sequence[str], np.ndarray] | None = None
-          ) -> TrackOutcome:
+          force_interval: bool = False, survey_covariance: tuple[Sequence[str], np.ndarray] | None = None,
+          clocks_interpolated: Sequence[tuple[float, float]] = ()) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -125,7 +111,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     ``burst_sequence_path``) shows to be no pings set aside before anything is fitted
     (:func:`~sblsim.orchestrator.tracks.tracker.set_aside`: their rows kept in the outputs with no estimate and the
     reason, listed in ``set_aside``), a stated interval the rows contradict as a whole refused unless
-    ``force_interval``."""
+    ``force_interval``; a row in one of ``clocks_interpolated`` ((start, end) [s since 1970 UTC]: the clocks linear
+    across a stretch of too few pings, :mod:`.row_flags`) flagged ``clocks_interpolated``."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -300,7 +287,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             if marked.any():
                 frame = frames["stationary"]
                 frame.loc[marked, "quality"] = "flagged"
-                frame.loc[marked, "quality_reason"] = _with_reason(frame["quality_reason"][marked], reason)
+                frame.loc[marked, "quality_reason"] = with_reason(frame["quality_reason"][marked], reason)
                 flagged["stationary"] = int((frame["quality"] == "flagged").sum())
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
@@ -346,7 +333,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     # a fix the checks do not trust (no arrival to spare, or its own chi2 test failed) is a position its own data
     # cannot vouch for: on the full array 39 of the 112 such rows were more than 10 m from the GPS
     frames["fix"].loc[~trusted[f], "quality"] = "flagged"
-    frames["fix"].loc[~trusted[f], "quality_reason"] = _with_reason(frames["fix"]["quality_reason"][~trusted[f]],
+    frames["fix"].loc[~trusted[f], "quality_reason"] = with_reason(frames["fix"]["quality_reason"][~trusted[f]],
                                                                     "untrusted_fix")
     flagged["fix"] = int((frames["fix"]["quality"] == "flagged").sum())
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
@@ -368,6 +355,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                 flagged[estimator] = int((frame["quality"] == "flagged").sum())
     if second is not None:
         at_second_place(frames, covariances, flagged, main, second, placed)
+    flag_interpolated(frames, flagged, clocks_interpolated, time_origin)
     estimates = pd.concat(frames.values(), ignore_index=True)
     chosen = frames[main].drop(columns=["estimator", "ping"]).reset_index(drop=True)
     at = np.full((len(toa), dim), np.nan)
@@ -397,7 +385,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         "gaps_s": [float(schedule.steps()[g]) for g in schedule.gaps],
         "restarts": 0 if record is None else len(record.restarts),
         "fixed": {e: int(len(fr)) for e, fr in frames.items()},
-        "flagged": flagged, "flag_reasons": _reason_counts(frames[main]["quality_reason"]),
+        "flagged": flagged, "flag_reasons": reason_counts(frames[main]["quality_reason"]),
         "trusted_fixes": int(trusted.sum()),
         "receivers_late": [{"receiver": names[k], "arrivals": int(judged.arrivals[k]),
                             "median_residual_sigmas": float(judged.median_z[k]), "kept_share": float(judged.kept[k])}

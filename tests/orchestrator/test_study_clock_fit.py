@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "boats-norway"
@@ -197,20 +198,50 @@ def test_a_clock_is_not_fitted_where_the_pings_are_too_few_to_tie_it(tmp_path, c
     assert stretch["pings"] == away.sum() and abs((stretch["end_s"] - stretch["start_s"]) / 3600.0 - 12.0) < 0.1
     said = capsys.readouterr()
     assert "the clocks linear across 1 stretch of too few pings to follow them (the longest 12 h" in said.out + said.err
+    # the clocks bend over 12 h (±10 ms over one to three days: 2.4 ms measured) more than the timing noise, so the
+    # noon rows, whose error is in no σ, are flagged; no other row is
+    assert stretch["rows_flagged"] and stretch["departure_s"] > 10 * SIGMA_TOA, stretch
+    assert "a moving tag's rows in 1 of them flagged clocks_interpolated" in said.out + said.err
+    tracks = pd.read_csv(out / "tracks.csv", keep_default_na=False)
+    inside = (tracks["epoch_s"] > stretch["start_s"]) & (tracks["epoch_s"] < stretch["end_s"])
+    flagged = tracks["quality_reason"].astype(str).str.contains("clocks_interpolated")
+    assert inside.sum() == away.sum() and (flagged == inside).all() and (tracks["quality"][inside] == "flagged").all()
 
 
 def test_the_stretches_said_are_those_the_knots_were_merged_across():
     """``clocks.sparse_stretches``: each stretch between the fit's knots spanning more than one window of the grid,
-    with the pings fitted in it (a day away with two pings; none where every window holds enough)."""
-    from sblsim.models.sync.knots import MIN_BIN_PINGS, WINDOW, merged
-    from sblsim.orchestrator.telemetry.study_offsets import sparse_stretches
+    with the pings fitted in it (18 h away with two pings; none where every window holds enough), how far the
+    clocks depart from a line over its length where the pings tie them (:func:`~sblsim.models.sync.knots.departure`
+    of the offsets given) and whether a moving tag's rows in it are flagged: not for clocks that are lines, for
+    clocks wandering by ±5 ms over a day (above the timing noise), and where the departure is not seen (the stretch
+    as long as the tied time's half); :func:`interpolated` gives the flagged ones of clocks fitted alone."""
+    from sblsim.models.sync.knots import MIN_BIN_PINGS, WINDOW, departure, merged
+    from sblsim.orchestrator.telemetry.clock_stretches import sparse_stretches
+    from sblsim.orchestrator.telemetry.study_offsets import FITTED, interpolated
 
-    grid = np.arange(11) * WINDOW + 1.7e9
-    counts = [MIN_BIN_PINGS, MIN_BIN_PINGS, 0, 0, 0, 2, 0, 0, MIN_BIN_PINGS, MIN_BIN_PINGS]
+    grid = np.arange(21) * WINDOW + 1.7e9
+    counts = [MIN_BIN_PINGS, MIN_BIN_PINGS, 0, 0, 0, 2, 0, 0] + [MIN_BIN_PINGS] * 12
     times = np.concatenate([np.linspace(grid[j] + 1.0, grid[j + 1] - 1.0, n) for j, n in enumerate(counts)])
-    assert sparse_stretches(merged(grid, times), grid, times) == [{"start_s": grid[2], "end_s": grid[8], "pings": 2}]
-    dense = np.linspace(grid[0], grid[-1], 10 * MIN_BIN_PINGS)
-    assert sparse_stretches(merged(grid, dense), grid, dense) == []
+    edges = merged(grid, times)
+    tau = (edges - edges[0])[None]
+    lines, sine = 0.01 + 2e-7 * tau * np.array([[1.0], [-3.0]]), 0.005 * np.sin(2 * np.pi * tau / 86400.0 + [[0.0],
+                                                                                                          [1.0]])
+    tied, sigma, spread = np.ones(lines.shape, bool), 1.5e-4, np.full(lines.shape, 1e-6)
+    stretch = {"start_s": grid[2], "end_s": grid[8], "pings": 2}
+    assert sparse_stretches(edges, grid, times, lines, tied, spread, sigma) == [
+        stretch | {"departure_s": 0.0, "rows_flagged": False}]
+    bent = departure(edges, sine, tied, grid[8] - grid[2], spread)
+    assert bent > sigma and sparse_stretches(edges, grid, times, sine, tied, spread, sigma) == [
+        stretch | {"departure_s": bent, "rows_flagged": True}]
+    short = grid[:11]  # (the stretch alone in the middle of the tied time: no chord of its length)
+    assert sparse_stretches(merged(short, times), short, times, lines[:, :6], tied[:, :6], spread[:, :6], sigma) == [
+        stretch | {"departure_s": None, "rows_flagged": True}]
+    dense = np.linspace(grid[0], grid[-1], 30 * MIN_BIN_PINGS)
+    assert sparse_stretches(merged(grid, dense), grid, dense, np.zeros((2, 21)), np.ones((2, 21), bool),
+                            np.zeros((2, 21)), sigma) == []
+    bends = [stretch | {"rows_flagged": True}, {"start_s": 1.0, "end_s": 2.0, "pings": 0, "rows_flagged": False}]
+    assert interpolated({"source": FITTED, "sparse_stretches": bends}) == [(grid[2], grid[8])]
+    assert interpolated({"source": "as logged", "sparse_stretches": bends}) == []
 
 
 def test_clocks_off_by_seconds_are_aligned_from_the_tags_detections_then_fitted(tmp_path):
