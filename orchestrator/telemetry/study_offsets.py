@@ -44,7 +44,7 @@ import pandas as pd
 
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
-from sblsim.models.sync.knots import knot_counts, knot_times, merged
+from sblsim.models.sync.knots import knot_counts, knot_times, merged, spread_pings
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
@@ -75,8 +75,10 @@ SPEED_PRIOR = 0.05
 #: between two clocks looked for (a coarse alignment's windows, and the fine fit's knots, are
 #: :data:`~sblsim.models.sync.knots.WINDOW` apart).
 SLOWEST, CROSSING_MARGIN, MAX_LAG = 1400.0, 0.05, 120.0
-#: The most pings fitted (heard by four receivers or more; a season's spread evenly in time): 20,000 pings of 20
-#: receivers tie each clock to a few microseconds, and a fit's cost is linear in them.
+#: The most pings fitted (heard by four receivers or more; a season's spread over its windows, never fewer than
+#: :data:`~sblsim.models.sync.knots.WINDOW_PINGS` from a window that holds as many:
+#: :func:`~sblsim.models.sync.knots.spread_pings`): 20,000 pings of 20 receivers tie each clock to a few
+#: microseconds, and a fit's cost is linear in them.
 MAX_PINGS = 20_000
 #: The rounds at most of the fit (each: the study made again on the clocks fitted, and they fitted again from it).
 ROUNDS = 4
@@ -207,9 +209,9 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     times = np.where(np.isfinite(times), times, span[0])
     owner = np.concatenate([np.full(len(p[0]), i) for i, p in enumerate(parts)])  # each ping's tag, its row there
     local = np.concatenate([np.arange(len(p[0])) for p in parts])
-    usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread in time)
-    keep = usable[np.argsort(times[usable], kind="stable")][np.linspace(0, len(usable) - 1, MAX_PINGS).astype(int)] \
-        if len(usable) > MAX_PINGS else usable
+    grid = knot_times(span) if on is None else on.edges
+    usable = np.flatnonzero(np.isfinite(toa).sum(axis=1) >= 4)  # (a season's: MAX_PINGS of them, spread by window)
+    keep = usable[spread_pings(times[usable], grid, MAX_PINGS)]
     toa, times, owner, local = toa[keep], times[keep], owner[keep], local[keep]
     heights = None if dim == 2 else np.full(len(toa), np.nan)
     for i in np.unique(owner) if heights is not None else []:  # (the pings kept alone fixed)
@@ -220,7 +222,6 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     unreached = [names[k] for k in np.setdiff1d(np.arange(len(names)), reached)]
     names, receivers, toa = [names[k] for k in reached], receivers[reached], toa[:, reached]
     # (every ping kept is heard by four or more: the clocks ``on`` put on this one's at the end)
-    grid = knot_times(span) if on is None else on.edges
     edges = merged(grid, times)  # (the grid's knots between which the pings fitted are enough to fit a clock)
     near = knot_counts(np.isfinite(toa), times, edges)  # (R, K + 1) the arrivals touching each knot
     base = int(np.argmax(np.isfinite(toa).sum(axis=0)))

@@ -8,7 +8,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sblsim.models.sync.knots import MIN_BIN_PINGS, WINDOW, departure, knot_counts, knot_times, merged
+from sblsim.models.sync.knots import (
+    MIN_BIN_PINGS,
+    WINDOW,
+    WINDOW_PINGS,
+    departure,
+    knot_counts,
+    knot_times,
+    merged,
+    spread_pings,
+)
 
 
 def test_a_knot_every_window_between_the_study_s_ends():
@@ -111,3 +120,33 @@ def test_a_departure_the_knots_noise_explains_is_none():
     sine = 10 * sigma * np.sin(2 * np.pi * edges / 86400.0)[None].repeat(20, axis=0)
     clean = departure(edges, sine, tied, 12 * 3600.0)
     assert departure(edges, sine + noisy, tied, 12 * 3600.0, spread) == pytest.approx(clean, rel=0.1)
+
+
+@pytest.mark.parametrize("most", [10_000, 900, 400, 50])
+def test_a_season_s_pings_are_taken_window_by_window(most):
+    """The pings fitted of a season's more than ``most``: from each window the same number q (every ping of one
+    that holds fewer), q the largest whose total is within ``most`` (found here by trying every q) but never below
+    :data:`WINDOW_PINGS`; a window's own spread evenly (its first and last taken), in time order, none twice; a ping
+    beyond the grid's ends in the end's window. Where the pings are no more than ``most``, every one in its order."""
+    rng = np.random.default_rng(11)
+    grid = np.arange(7) * WINDOW
+    counts = [500, 10, 0, 200, 45, 1000]
+    times = np.concatenate([rng.uniform(grid[j], grid[j + 1], n) for j, n in enumerate(counts)] +
+                           [[-5.0, grid[-1] + 5.0]])  # (one before the grid, one after)
+    times = rng.permutation(times)
+    kept = spread_pings(times, grid, most)
+    if len(times) <= most:
+        assert np.array_equal(kept, np.arange(len(times)))
+        return
+    window = np.clip(np.floor(times / WINDOW).astype(int), 0, 5)
+    holds = np.bincount(window, minlength=6)
+    q = max([q for q in range(holds.max() + 1) if np.minimum(holds, q).sum() <= most] + [0])
+    q = max(q, WINDOW_PINGS)
+    assert len(np.unique(kept)) == len(kept) and (np.diff(times[kept]) >= 0).all()
+    assert np.array_equal(np.bincount(window[kept], minlength=6), np.minimum(holds, q))
+    for j in range(6):
+        mine = np.flatnonzero(window == j)
+        if len(mine):
+            assert times[kept][window[kept] == j].min() == times[mine].min()
+            assert times[kept][window[kept] == j].max() == times[mine].max()
+    assert len(kept) <= max(most, WINDOW_PINGS * 6)
