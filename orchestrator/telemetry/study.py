@@ -67,7 +67,7 @@ from sblsim.orchestrator.telemetry.kept_clocks import kept_study_clocks
 from sblsim.orchestrator.telemetry.reference_tags import score as score_references
 from sblsim.orchestrator.telemetry.study_clocks import TOO_COARSE, taken_survey
 from sblsim.orchestrator.telemetry.study_detections import StudyDetections, Tally
-from sblsim.orchestrator.telemetry.study_offsets import aligned, fits, fitted_study, interpolated
+from sblsim.orchestrator.telemetry.study_offsets import aligned, fits, fitted_options, fitted_study
 from sblsim.orchestrator.telemetry.study_offsets import said as clocks_said
 from sblsim.orchestrator.telemetry.study_positions import REFINED_FOLDER, refined_study
 from sblsim.orchestrator.telemetry.study_tracks import TRACK_COLUMNS, TrackParts, combined_tracks
@@ -337,7 +337,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
             frame_crs = None if deployments.frame is None else deployments.frame.crs
             rows: dict[str, dict[str, Any]] = {}
             jobs, matrices, folders = [], {}, {}
-            logged, bent = clocks_info["source"].startswith("as logged"), interpolated(clocks_info)
+            logged = clocks_info["source"].startswith("as logged")
             untracked = fits(clocks_info["source"]) if untracked is None else untracked
             lean = light and not untracked  # (a clocks' fit reads the tags' matrices)
             keys = [_key(name, detected) for name, _ in asked]
@@ -391,7 +391,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
                     if errors is not None and spec.motion != "stationary":  # refined together: correlated errors
                         options["survey_covariance"] = errors
-                    options |= {"clocks_interpolated": bent} if bent and spec.motion != "stationary" else {}
+                    options |= fitted_options(clocks_info, spec.motion != "stationary")  # (clocks fitted: the pings')
                     if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                         options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                     np.isfinite(matrix.toa).any(axis=0))

@@ -269,7 +269,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                    edges, grid, times, at[kept[kept != base]], mine[kept[kept != base]],
                    fit.bias_sigma[kept[kept != base]] / fitted, sigma),
                "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
-               "sound_speed_m_s": fitted,
+               "sound_speed_m_s": fitted, "sound_speed_sigma_m_s": speed * fit.speed_scale_sigma if sound_speed is None
+               else None,
                "time_base_by_knot": [names[b] for b in bases[np.abs(grid[:, None] - edges).argmin(axis=1)]]
                if (bases != base).any() else None,
                "held_out": {"logged_chi2_per_dof": check.surveyed, "fitted_chi2_per_dof": check.refined,
@@ -289,6 +290,27 @@ def interpolated(info: dict[str, Any]) -> list[tuple[float, float]]:
     if info.get("source") != FITTED:
         return []
     return [(s["start_s"], s["end_s"]) for s in info.get("sparse_stretches") or [] if s.get("rows_flagged")]
+
+
+def study_speed(info: dict[str, Any]) -> tuple[float, float] | None:
+    """The study's own sound speed [m/s] and its σ [m/s] where its clocks were fitted from its tags' pings with the
+    speed's scale (``info``: ``study.json``'s ``clocks``; none given), each tag's fallback in place of the default's
+    (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`): its σ the fit's with the largest a tag's own
+    calibration is taken at (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`, in quadrature: one speed for the
+    season stands for the water a tag's pings crossed no better than the weakest calibration a tag's pings give);
+    None otherwise."""
+    from sblsim.models.tracking.calibration import MAX_SIGMA
+
+    sigma = info.get("sound_speed_sigma_m_s") if info.get("source") == FITTED else None
+    return None if sigma is None else (float(info["sound_speed_m_s"]), float(np.hypot(sigma, MAX_SIGMA)))
+
+
+def fitted_options(info: dict[str, Any], moving: bool) -> dict[str, Any]:
+    """A tag's tracking options from clocks fitted from the study's tags' pings (``info``: ``study.json``'s
+    ``clocks``): a moving tag's ``clocks_interpolated`` (:func:`interpolated`) and every tag's ``study_speed``
+    (:func:`study_speed`), each where there is one; none for clocks not so fitted."""
+    bent, speed = interpolated(info) if moving else [], study_speed(info)
+    return ({"clocks_interpolated": bent} if bent else {}) | ({"study_speed": speed} if speed else {})
 
 
 def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,
@@ -470,4 +492,5 @@ def note(summary: dict[str, Any]) -> str:
 
 
 __all__ = ["CLOCK_PRIOR", "ROUNDS", "ClockFit", "FITTED", "FITTED_FROM", "aligned", "fit_clocks", "fits",
-           "fitted_study", "held_heights", "interpolated", "misfit", "note", "said", "split_reasons"]
+           "fitted_options", "fitted_study", "held_heights", "interpolated", "misfit", "note", "said", "split_reasons",
+           "study_speed"]

@@ -114,12 +114,17 @@ def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.
             "disagreement_sigmas": sigmas, "disagrees": bool(sigmas > SPEED_CHECK_SIGMAS)}
 
 
+#: The fallback's words where it is the study's own speed (``study_speed``).
+STUDY_SPEED = "the study's speed, fitted with its clocks from its moving tags' pings"
+
+
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
                       series_path: Path | None = None, temperature: float | None = None,
                       salinity: float | None = None, depth: np.ndarray | None = None,
                       depth_sigma: float = DEPTH_SIGMA, time_origin: float | None = None,
                       sigma_toa: float | np.ndarray = SIGMA_TOA, temperature_path: Path | None = None,
-                      water: Water | None = None, still: bool = False) -> tuple[np.ndarray, float, dict[str, Any]]:
+                      water: Water | None = None, still: bool = False,
+                      study_speed: tuple[float, float] | None = None) -> tuple[np.ndarray, float, dict[str, Any]]:
     """The sound speed the estimators take, and the times of arrival they take at it: ``sound_speed`` [m/s] where
     given; else a measured series (``series_path``,
     :func:`~sblsim.orchestrator.readers.time_series.read_sound_speed_series`) whose median is the reference speed and
@@ -140,7 +145,9 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     calibration outside them is replaced by the water's own speed (:data:`REPLACED_SOURCE`). A ``still`` tag's pings
     that cannot be fitted one by one (an array of four) are calibrated as one place
     (:func:`~sblsim.models.tracking.still_speed.calibrate_still_sound_speed`) before the fallback is taken; where that
-    fails too, the fallback says why (``still_calibration``).
+    fails too, the fallback says why (``still_calibration``). ``study_speed`` (the speed [m/s] and its σ [m/s]: a
+    study's own, fitted with its clocks from its moving tags' pings) is the fallback where no ``temperature`` is
+    given, in place of the default's 51 m/s.
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.tracking.calibration import calibrate_sound_speed
 
@@ -161,6 +168,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                                                            float(temperatures[:, 1].max())], "water": water.info()}
     prior, prior_sigma, words = ss.fallback_prior(temperature, salinity, water.depth, water.latitude,
                                                   water.longitude)  # refuses a bad temperature or salinity
+    if study_speed is not None and temperature is None:  # the study's own speed: its pings', not a default's
+        prior, prior_sigma, words = float(study_speed[0]), float(study_speed[1]), STUDY_SPEED
     if sound_speed is not None:
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | speed_check(
             toa, positions, sound_speed, depth, depth_sigma, sigma_toa)

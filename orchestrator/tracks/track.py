@@ -83,7 +83,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           time_origin: float | None = None, other_filters: bool = True, toa_sigma: float | None = None,
           temperature_path: Path | None = None, water_depth: float | None = None,
           force_interval: bool = False, survey_covariance: tuple[Sequence[str], np.ndarray] | None = None,
-          clocks_interpolated: Sequence[tuple[float, float]] = ()) -> TrackOutcome:
+          clocks_interpolated: Sequence[tuple[float, float]] = (),
+          study_speed: tuple[float, float] | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -112,7 +113,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     (:func:`~sblsim.orchestrator.tracks.tracker.set_aside`: their rows kept in the outputs with no estimate and the
     reason, listed in ``set_aside``), a stated interval the rows contradict as a whole refused unless
     ``force_interval``; a row in one of ``clocks_interpolated`` ((start, end) [s since 1970 UTC]: the clocks linear
-    across a stretch of too few pings, :mod:`.row_flags`) flagged ``clocks_interpolated``."""
+    across a stretch of too few pings, :mod:`.row_flags`) flagged ``clocks_interpolated``; ``study_speed`` the
+    study's own speed and its σ [m/s] as the sound speed's fallback (:func:`~.speed.sound_speed_stage`)."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -168,11 +170,12 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                          for v in (receivers.clock_sigma, receivers.clock_mean, receivers.rounding))
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
-                                      water=water, still=motion == "stationary")  # a still tag's pings one place
+                                      water=water, still=motion == "stationary", study_speed=study_speed)
     if fixed_depth is not None:  # one depth given: against where the arrivals put the tag with its depth free, at a
         # speed the given depth did not calibrate
         free_c = c if speed["source"] in ("given", "measured series", TEMPERATURE_SOURCE) else sound_speed_stage(
-            toa, positions, None, None, temperature, salinity, None, depth_sigma, sigma_toa=sigma, water=water)[1]
+            toa, positions, None, None, temperature, salinity, None, depth_sigma, sigma_toa=sigma, water=water,
+            study_speed=study_speed)[1]
         free = tt.fix_pings(toa, positions, free_c, sigma)
         check_given_depth(fixed_depth, depth_sigma, free[0], free[2], free[3].sum(axis=1), positions)
     # the estimators solved with the receivers as surveyed; the survey error added to the covariances reported
@@ -187,7 +190,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
             # pings (or fallen back where they could not be fitted): again with the prior; the times of arrival as
             # read (none rescaled)
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma,
-                                              sigma_toa=sigma, water=water, still=motion == "stationary")
+                                              sigma_toa=sigma, water=water, still=motion == "stationary",
+                                              study_speed=study_speed)
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2, dim,
                                None if depth is None else np.isfinite(depth))

@@ -244,6 +244,43 @@ def test_the_stretches_said_are_those_the_knots_were_merged_across():
     assert interpolated({"source": "as logged", "sparse_stretches": bends}) == []
 
 
+def test_a_tag_s_options_from_clocks_fitted_from_the_pings():
+    """:func:`fitted_options`: a moving tag's stretches of interpolated clocks (those flagged alone), every tag's
+    study speed (the fit's σ and :data:`~sblsim.models.tracking.calibration.MAX_SIGMA` in quadrature), none where the
+    speed was given or the clocks are not fitted from the pings."""
+    from sblsim.models.tracking.calibration import MAX_SIGMA
+    from sblsim.orchestrator.telemetry.study_offsets import FITTED, fitted_options, study_speed
+
+    stretches = [{"start_s": 1.0, "end_s": 2.0, "pings": 1, "departure_s": None, "rows_flagged": True},
+                 {"start_s": 3.0, "end_s": 4.0, "pings": 2, "departure_s": 0.0, "rows_flagged": False}]
+    info = {"source": FITTED, "sound_speed_m_s": 1478.7, "sound_speed_sigma_m_s": 3.0, "sparse_stretches": stretches}
+    speed = (1478.7, float(np.hypot(3.0, MAX_SIGMA)))
+    assert study_speed(info) == speed
+    assert fitted_options(info, True) == {"clocks_interpolated": [(1.0, 2.0)], "study_speed": speed}
+    assert fitted_options(info, False) == {"study_speed": speed}
+    given = info | {"sound_speed_sigma_m_s": None}
+    assert study_speed(given) is None and fitted_options(given, True) == {"clocks_interpolated": [(1.0, 2.0)]}
+    assert fitted_options(info | {"source": "as logged"}, True) == {}
+
+
+@pytest.mark.slow
+def test_four_receivers_take_the_study_s_speed_where_their_pings_cannot_calibrate_it(tmp_path):
+    """Four receivers: no ping is heard by the five a tag's calibration needs, so each tag fell back on 1,500 m/s,
+    51 m/s uncertain (the water's 1,480 m/s): a median 0.54-0.88 m from the truth with a σ of 1.4-1.9 m (NEES
+    0.9-1.2; seeds 6 and 7: 0.58-0.74 m, NEES 0.5-0.9). The clocks' fit from the pings fits the speed's scale with
+    them (1,478.7 m/s, 3.6 m/s uncertain), and each tag now takes it as its fallback: every tag at that speed, each
+    a median below 0.45 m (0.28-0.32 m measured) with a NEES (2-D) in [1, 4.5] (3.2-4.1; seeds 6 and 7: 0.24-0.29 m,
+    NEES 2.0-3.1)."""
+    sim, out, study = _study(tmp_path, 0.01, 1e-7, unheard=True, receivers=4)
+    clocks = study["clocks"]
+    assert abs(clocks["sound_speed_m_s"] - 1480.0) < 5.0 and clocks["sound_speed_sigma_m_s"] > 0.0, clocks
+    tags = pd.read_csv(out / "tags.csv")
+    assert (tags["sound_speed_source"] == "fallback").all()
+    assert np.allclose(tags["sound_speed_m_s"], clocks["sound_speed_m_s"]), tags["sound_speed_m_s"]
+    for tag, rows in _errors(sim, out, clocks["reference_receiver"]).groupby("tag"):
+        assert rows["error"].median() < 0.45 and 1.0 <= rows["nees"].mean() <= 4.5, (tag, rows.describe())
+
+
 def test_clocks_off_by_seconds_are_aligned_from_the_tags_detections_then_fitted(tmp_path):
     """Each clock off by up to ±2 s and drifting by up to 20 ppm (a receiver's raw clock: half a second over the six
     hours), no sync tag named: a ping's arrivals are seconds apart and the tags were refused as logged (their
