@@ -51,4 +51,5 @@ def stretches_said(stretches: list[dict[str, Any]]) -> str:
                 f", more than the timing noise: a moving tag's rows in {len(flagged)} of them flagged "
                 f"clocks_interpolated" if flagged else ", within the timing noise"))
 
+
 __all__ = ["sparse_stretches", "stretches_said"]
