@@ -45,6 +45,7 @@ import pandas as pd
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.coarse_lags import coarse_offsets
 from sblsim.models.sync.knots import knot_counts, knot_times, merged, spread_pings
+from sblsim.models.tracking.calibration import MAX_SIGMA
 from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
@@ -299,8 +300,6 @@ def study_speed(info: dict[str, Any]) -> tuple[float, float] | None:
     calibration is taken at (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`, in quadrature: one speed for the
     season stands for the water a tag's pings crossed no better than the weakest calibration a tag's pings give);
     None otherwise."""
-    from sblsim.models.tracking.calibration import MAX_SIGMA
-
     sigma = info.get("sound_speed_sigma_m_s") if info.get("source") == FITTED else None
     return None if sigma is None else (float(info["sound_speed_m_s"]), float(np.hypot(sigma, MAX_SIGMA)))
 
