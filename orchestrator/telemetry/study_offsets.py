@@ -259,6 +259,7 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
     kept = np.flatnonzero(taken)
     clocks = Clocks([names[k] for k in kept], grid, knots[kept], clock_sigma=np.where(kept == base, 0.0,
                                                                                       spread[kept]))
+    others = kept[kept != base]  # (the clocks taken but the time base's)
     reach = np.where(mine, np.abs(at), 0.0)  # (the knots a deployment's own arrivals touch)
     largest = kept[int(np.argmax(reach[kept].max(axis=1)))]
     summary = {"source": FITTED, "reference_receiver": names[base], "receivers": len(kept),
@@ -267,9 +268,8 @@ def fit_clocks(outcome, deployments, span: tuple[float, float], on: Clocks | Non
                "largest_offset_s": float(reach[largest].max()), "largest_offset_receiver": names[largest],
                "offsets_s": {names[k]: knots[k].tolist() for k in kept}, "knot_times_s": grid.tolist(),
                "fitted_knot_times_s": edges.tolist(), "sparse_stretches": sparse_stretches(
-                   edges, grid, times, at[kept[kept != base]], mine[kept[kept != base]],
-                   fit.bias_sigma[kept[kept != base]] / fitted, sigma),
-               "offset_sigma_s": {names[k]: float(spread[k]) for k in kept if k != base},
+                   edges, grid, times, at[others], mine[others], fit.bias_sigma[others] / fitted, sigma),
+               "offset_sigma_s": {names[k]: float(spread[k]) for k in others},
                "sound_speed_m_s": fitted, "sound_speed_sigma_m_s": speed * fit.speed_scale_sigma if sound_speed is None
                else None,
                "time_base_by_knot": [names[b] for b in bases[np.abs(grid[:, None] - edges).argmin(axis=1)]]

@@ -1,8 +1,8 @@
 """A tag's rows flagged after its estimators have made them: a quality reason added to a row's (:func:`with_reason`),
-the rows each reason holds for (:func:`reason_counts`), and the rows whose pings lie where the receivers' clocks
-are interpolated across a stretch of too few pings to follow them (:func:`flag_interpolated`: a study's clocks
-fitted from its moving tags' pings, :mod:`~sblsim.orchestrator.telemetry.clock_stretches`), whose error is in no
-row's σ.
+the rows each reason holds for (:func:`reason_counts`), an estimator's rows flagged with a reason (:func:`flag_rows`),
+and the rows whose pings lie where the receivers' clocks are interpolated across a stretch of too few pings to follow
+them (:func:`flag_interpolated`: a study's clocks fitted from its moving tags' pings,
+:mod:`~sblsim.orchestrator.telemetry.clock_stretches`), whose error is in no row's σ.
 """
 
 from __future__ import annotations
@@ -29,6 +29,14 @@ def reason_counts(reason: pd.Series) -> dict[str, int]:
     return {str(k): int(v) for k, v in named.value_counts().items()}
 
 
+def flag_rows(frame: pd.DataFrame, rows, reason: str) -> int:
+    """An estimator's ``rows`` (a boolean mask or the frame's labels) of ``frame`` flagged, ``reason`` added to each
+    one's (:func:`with_reason`), in place; returns the frame's flagged rows counted again."""
+    frame.loc[rows, "quality"] = "flagged"
+    frame.loc[rows, "quality_reason"] = with_reason(frame["quality_reason"][rows], reason)
+    return int((frame["quality"] == "flagged").sum())
+
+
 def flag_interpolated(frames: dict[str, Any], flagged: dict[str, int], stretches: Sequence[tuple[float, float]],
                       origin: float | None) -> int:
     """Every estimator's rows (``frames``: each a frame with ``time`` [s from ``origin``, s since 1970 UTC]) whose
@@ -44,11 +52,9 @@ def flag_interpolated(frames: dict[str, Any], flagged: dict[str, int], stretches
         t = frame["time"].to_numpy(float) + origin
         inside = ((t[:, None] > bounds[:, 0]) & (t[:, None] < bounds[:, 1])).any(axis=1)
         if inside.any():
-            frame.loc[inside, "quality"] = "flagged"
-            frame.loc[inside, "quality_reason"] = with_reason(frame["quality_reason"][inside], INTERPOLATED_REASON)
-            flagged[estimator] = int((frame["quality"] == "flagged").sum())
+            flagged[estimator] = flag_rows(frame, inside, INTERPOLATED_REASON)
         first = int(inside.sum()) if first is None else first
     return first or 0
 
 
-__all__ = ["INTERPOLATED_REASON", "flag_interpolated", "reason_counts", "with_reason"]
+__all__ = ["INTERPOLATED_REASON", "flag_interpolated", "flag_rows", "reason_counts", "with_reason"]

@@ -45,7 +45,7 @@ from sblsim.orchestrator.tracks.depth import (
     undetermined_depth,
 )
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
-from sblsim.orchestrator.tracks.row_flags import flag_interpolated, reason_counts, with_reason
+from sblsim.orchestrator.tracks.row_flags import flag_interpolated, flag_rows, reason_counts
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
 from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
@@ -289,10 +289,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
         for marked, reason in ((still.moved, "tag_moved"), (np.full(len(still.moved), still.unchecked),
                                                             "motion_unchecked")):
             if marked.any():
-                frame = frames["stationary"]
-                frame.loc[marked, "quality"] = "flagged"
-                frame.loc[marked, "quality_reason"] = with_reason(frame["quality_reason"][marked], reason)
-                flagged["stationary"] = int((frame["quality"] == "flagged").sum())
+                flagged["stationary"] = flag_rows(frames["stationary"], marked, reason)
     else:
         positioned = record.used.any(axis=1) & np.isfinite(record.x_filtered[:, 0])
         k = np.flatnonzero(positioned)
@@ -336,10 +333,7 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     rows("fix", f, fe[f], fx[f], fc[f][:, :dim, :dim], fused[f].sum(axis=1), None, fix_extra)
     # a fix the checks do not trust (no arrival to spare, or its own chi2 test failed) is a position its own data
     # cannot vouch for: on the full array 39 of the 112 such rows were more than 10 m from the GPS
-    frames["fix"].loc[~trusted[f], "quality"] = "flagged"
-    frames["fix"].loc[~trusted[f], "quality_reason"] = with_reason(frames["fix"]["quality_reason"][~trusted[f]],
-                                                                    "untrusted_fix")
-    flagged["fix"] = int((frames["fix"]["quality"] == "flagged").sum())
+    flagged["fix"] = flag_rows(frames["fix"], ~trusted[f], "untrusted_fix")
     # the stationary fix, else the robust smoother where it ran, else the causal EKF
     main = next(iter(frames)) if smooth or stationary else "ekf"
     if stray.any():  # the rows set aside: in the track with no estimate and their reason, the row numbering kept
