@@ -23,7 +23,10 @@ aside, the rest fitted again, up to :data:`MAX_ROUNDS` times. On simulated array
 σ holds to a few per cent with up to one pair in ten so lengthened, not with one in five.
 
 The array's translation and rotation change no range, and its scale is the sound speed's: neither is seen, and
-neither is counted (their part of ``A`` is in ``M``'s null space or takes no share of ``tr(Aᵀ M A)``). A reflection
+neither is counted (their part of ``A`` is in ``M``'s null space or takes no share of ``tr(Aᵀ M A)``). The speed the
+synchronisation estimates takes that scale: its relative error from the positions' is ``σ ‖e X⁺ A‖`` (``e`` picking
+the distance's coefficient of the least squares ``X β = A δ``: the same pairs, each weighed alike), ``scale_sigma``
+per metre of ``σ``, NaN where the pairs do not determine the scale. A reflection
 that lengthens many pairs' paths for the whole season is counted as the positions' error: where most paths reflect,
 ``σ`` is an upper bound of the survey's.
 
@@ -56,7 +59,9 @@ Z_SEEN = 3.0
 class SurveyError:
     """The survey error a synchronisation's residuals show: ``sigma`` [m per horizontal axis] (0 where not seen),
     its standard error ``sigma_se`` [m], ``z`` the excess over the noise in standard deviations, ``seen``, ``pairs``,
-    ``degrees`` (the pairs kept less what the fit absorbs) and the pairs ``set_aside`` as gross."""
+    ``degrees`` (the pairs kept less what the fit absorbs), the pairs ``set_aside`` as gross, and ``scale_sigma``
+    [1/m] the estimated sound speed's relative error per metre of survey error (σ per axis) on the pairs kept (NaN
+    where they do not determine it)."""
 
     sigma: float
     sigma_se: float
@@ -65,6 +70,7 @@ class SurveyError:
     pairs: int
     degrees: int
     set_aside: int
+    scale_sigma: float = float("nan")
 
     def summary(self) -> dict:
         """``sync.json``'s ``survey_error``."""
@@ -73,7 +79,8 @@ class SurveyError:
 
         return {"survey_sigma_m": number(self.sigma), "survey_sigma_se_m": number(self.sigma_se),
                 "excess_z": number(self.z), "seen": self.seen, "pairs": self.pairs, "degrees": self.degrees,
-                "pairs_set_aside": self.set_aside, "z_seen": Z_SEEN}
+                "pairs_set_aside": self.set_aside, "z_seen": Z_SEEN,
+                "speed_scale_sigma_per_m": number(self.scale_sigma)}
 
 
 def survey_error(median: np.ndarray, count: np.ndarray, scale: np.ndarray, listener: np.ndarray, home: np.ndarray,
@@ -135,13 +142,22 @@ def survey_error(median: np.ndarray, count: np.ndarray, scale: np.ndarray, liste
             break
         gross[np.flatnonzero(~gross)[far]] = True
         fit = _moments(median[~gross], A[~gross], X[~gross], noise[~gross])
+    scale = _scale_sigma(A[~gross], X[~gross])
     if fit is None or fit.parts is None:
-        return SurveyError(float("nan"), float("nan"), float("nan"), False, P, 0, int(gross.sum()))
+        return SurveyError(float("nan"), float("nan"), float("nan"), False, P, 0, int(gross.sum()), scale)
     seen = bool(fit.z >= Z_SEEN)
     sigma = float(np.sqrt(fit.variance)) if seen else 0.0
     se = float(fit.se_variance / (2.0 * np.sqrt(fit.variance))) if fit.variance > 0 else float(
         np.sqrt(fit.se_variance))
-    return SurveyError(sigma, se, fit.z, seen, P, fit.degrees, int(gross.sum()))
+    return SurveyError(sigma, se, fit.z, seen, P, fit.degrees, int(gross.sum()), scale)
+
+
+def _scale_sigma(A: np.ndarray, X: np.ndarray) -> float:
+    """The distance's coefficient's standard deviation per unit survey error, ``‖e X⁺ A‖`` [1/m] (the module
+    docstring); NaN where the other columns span the distance's (the scale not determined) or there is no pair."""
+    if not len(X) or np.linalg.matrix_rank(X) == np.linalg.matrix_rank(X[:, :-1]):
+        return float("nan")
+    return float(np.linalg.norm((np.linalg.pinv(X) @ A)[-1]))
 
 
 @dataclass(frozen=True)

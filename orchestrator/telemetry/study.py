@@ -391,7 +391,7 @@ def run_study(detections: Path | Sequence[Path], receivers: Path | None, tags: P
                                "force_interval": force_interval, "temperature_path": water_path, "survey_sigma": taken}
                     if errors is not None and spec.motion != "stationary":  # refined together: correlated errors
                         options["survey_covariance"] = errors
-                    options |= fitted_options(clocks_info, spec.motion != "stationary")  # (clocks fitted: the pings')
+                    options |= fitted_options(clocks_info, spec.motion != "stationary")  # (clocks fitted here)
                     if bottom is not None:  # each tag's water from the bottom at the receivers that heard it
                         options["water_depth"] = bottom_water_depth(bottom[matrix.names].to_numpy(float),
                                                                     np.isfinite(matrix.toa).any(axis=0))

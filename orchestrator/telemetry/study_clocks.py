@@ -25,6 +25,8 @@ TOO_COARSE = "as logged (times too coarse to synchronise)"
 UNHEARD = "as logged (no sync tag heard)"
 #: The clocks' source where no deployment names a sync tag.
 NO_SYNC_TAG = "as logged (no sync tag)"
+#: The clocks' source where they are synchronised here from the deployments' sync tags.
+SYNCHRONISED_HERE = "synchronised here"
 
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
@@ -71,13 +73,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
             notes.extend(s.get("warnings", []))  # each clock break found, in one line
             # why a receiver is not synchronised, and the sync tags nobody heard (one mistyped, or dead)
             notes.extend(n for n in s.get("notes", []) if n.startswith((NOT_SYNCHRONISED, NEVER_HEARD)))
-            info = {"source": "synchronised here", "reference_receiver": s["reference_receiver"],
+            info = {"source": SYNCHRONISED_HERE, "reference_receiver": s["reference_receiver"],
                     "receivers": len(s["synchronised"]), "not_synchronised": s["not_synchronised"],
                     "clock_breaks": s["clock_breaks"],
                     "median_abs_residual_m": s["median_abs_residual_m"], "bin_hours": bin_hours,
                     "sync_tags_median_error_m": (s["sync_tags"] or {}).get("median_error_m"),
                     "survey_error": s.get("survey_error"), "survey_sigma_m": s.get("survey_sigma_m"),
                     "survey_sigma_from": s.get("survey_sigma_from")}
+            info |= estimated_speed(s)
             if "windows" in s:  # a season fitted window by window (sblsim.models.sync.windows)
                 info["windows"] = s["windows"]
             return offsets_clocks(outcome.offsets), table, info, outcome
@@ -97,6 +100,26 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": [], "note": note}, None
 
 
+def estimated_speed(summary: dict) -> dict:
+    """The sound speed [m/s] a synchronisation estimated with its clocks (``summary``: its ``sync.json``'s) and its
+    σ [m/s] (``study.json``'s ``clocks``: each tag's fallback, :func:`~.study_offsets.study_speed`): the fit's and
+    the survey error it took (``survey_sigma_m``; each receiver's: their RMS) through the array's scale
+    (:mod:`sblsim.models.sync.survey_error`, ``speed_scale_sigma_per_m``), in quadrature: a position off stretches
+    the sync tags' ranges, which the speed takes; the fit's σ alone does not count it. Nothing (an empty dict) where
+    the speed was given or the fit has no σ."""
+    speed = summary.get("sound_speed") or {}
+    fit = speed.get("sound_speed_sigma_m_s")
+    if speed.get("source") != "estimated" or fit is None:
+        return {}
+    c = float(speed["sound_speed_m_s"])
+    scale = (summary.get("survey_error") or {}).get("speed_scale_sigma_per_m")
+    taken = summary.get("survey_sigma_m") or 0.0  # (each receiver's: their RMS)
+    taken = float(np.sqrt(np.mean(np.square(list(taken.values()))))) if isinstance(taken, dict) else float(taken)
+    survey = c * taken * (0.0 if scale is None else float(scale))
+    return {"sound_speed_m_s": c, "sound_speed_sigma_m_s": float(np.hypot(fit, survey)),
+            "sound_speed_survey_sigma_m_s": survey}
+
+
 def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:
     """The receivers' survey error [m per horizontal axis] a study's σ take: the one ``stated`` (0: none, the
     positions taken as exact), else, without the refinement (``refine``: its prior is the survey's), a given folder's
@@ -112,4 +135,5 @@ def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict
     return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
-__all__ = ["NO_SYNC_TAG", "TOO_COARSE", "UNHEARD", "study_clocks", "taken_survey"]
+__all__ = ["NO_SYNC_TAG", "SYNCHRONISED_HERE", "TOO_COARSE", "UNHEARD", "estimated_speed", "study_clocks",
+           "taken_survey"]

@@ -115,7 +115,8 @@ def speed_check(toa: np.ndarray, positions: np.ndarray, given: float, depth: np.
 
 
 #: The fallback's words where it is the study's own speed (``study_speed``).
-STUDY_SPEED = "the study's speed, fitted with its clocks from its moving tags' pings"
+STUDY_SPEED = ("the study's speed, fitted with its clocks (from its sync tags, or from its moving tags' pings where "
+               "none is heard)")
 
 
 def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float | None = None,
@@ -146,8 +147,8 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
     that cannot be fitted one by one (an array of four) are calibrated as one place
     (:func:`~sblsim.models.tracking.still_speed.calibrate_still_sound_speed`) before the fallback is taken; where that
     fails too, the fallback says why (``still_calibration``). ``study_speed`` (the speed [m/s] and its σ [m/s]: a
-    study's own, fitted with its clocks from its moving tags' pings) is the fallback where no ``temperature`` is
-    given, in place of the default's 51 m/s.
+    study's own, fitted with its clocks from its sync tags or its moving tags' pings) is the fallback where no
+    ``temperature`` is given, in place of the default's 51 m/s.
     Returns ``toa`` (m, n) [s], the speed [m/s] and what was done (``summary.json``'s ``sound_speed``)."""
     from sblsim.models.tracking.calibration import calibrate_sound_speed
 
@@ -168,7 +169,7 @@ def sound_speed_stage(toa: np.ndarray, positions: np.ndarray, sound_speed: float
                                                            float(temperatures[:, 1].max())], "water": water.info()}
     prior, prior_sigma, words = ss.fallback_prior(temperature, salinity, water.depth, water.latitude,
                                                   water.longitude)  # refuses a bad temperature or salinity
-    if study_speed is not None and temperature is None:  # the study's own speed: its pings', not a default's
+    if study_speed is not None and temperature is None:  # the study's own speed, not a default's
         prior, prior_sigma, words = float(study_speed[0]), float(study_speed[1]), STUDY_SPEED
     if sound_speed is not None:
         return toa, sound_speed, {"sound_speed_m_s": sound_speed, "source": "given"} | speed_check(
