@@ -34,22 +34,20 @@ MAX_SYNC_JSON_BYTES = 64 * 2**20
 MAX_SYNC_JSON_LINES = 5_000_000
 
 
-def folder_survey(folder: Path | str) -> float | None:
-    """The survey error [m per horizontal axis] a synchronisation's ``folder`` took as seen (module docstring);
-    None where it took none (stated, not seen, or no ``sync.json``).
+def read_sync_json(folder: Path | str) -> tuple[dict | None, str]:
+    """A synchronisation's ``folder``'s ``sync.json`` as a JSON object (None where it has none) and its name as said
+    in a refusal, read as anyone's (module docstring): nothing in it is taken unchecked.
 
     Raises
     ------
     ModelError
-        ``sync.json`` larger than :data:`MAX_SYNC_JSON_BYTES`, not JSON, not an object, or its ``survey_sigma_m``
-        not a number in a stated survey error's range
-        (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took one (one line).
+        ``sync.json`` larger than :data:`MAX_SYNC_JSON_BYTES`, not JSON, or not an object (one line).
     """
     folder = Path(folder)
     path = inside(folder, "sync.json", f"sync: {str(folder)[:80]!r}", "synchronisation")
-    if not path.is_file():
-        return None
     shown = f"sync: {str(path)[:120]!r}"
+    if not path.is_file():
+        return None, shown
     text = read_text(path, "sync", MAX_SYNC_JSON_BYTES, MAX_SYNC_JSON_LINES)
     try:
         data = json.loads(text)
@@ -57,7 +55,22 @@ def folder_survey(folder: Path | str) -> float | None:
         raise ModelError(f"{shown} is not JSON ({str(exc)[:80]}); allowed: the sync.json sblsim sync writes") from None
     if not isinstance(data, dict):
         raise ModelError(f"{shown} holds no JSON object; allowed: the sync.json sblsim sync writes")
-    if data.get("survey_sigma_from") != "seen":
+    return data, shown
+
+
+def folder_survey(folder: Path | str) -> float | None:
+    """The survey error [m per horizontal axis] a synchronisation's ``folder`` took as seen (module docstring);
+    None where it took none (stated, not seen, or no ``sync.json``).
+
+    Raises
+    ------
+    ModelError
+        ``sync.json`` refused (:func:`read_sync_json`), or its ``survey_sigma_m`` not a number in a stated survey
+        error's range (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took
+        one (one line).
+    """
+    data, shown = read_sync_json(folder)
+    if data is None or data.get("survey_sigma_from") != "seen":
         return None
     return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_SIGMA_RANGE, "m")
 
@@ -90,5 +103,5 @@ def folder_position_sigmas(folder: Path | str, names: Sequence[str]) -> dict[str
     return {str(n): sigmas.get(str(n), max(sigmas.values())) for n in names}
 
 
-__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "folder_position_sigmas", "folder_survey",
+__all__ = ["MAX_SYNC_JSON_BYTES", "MAX_SYNC_JSON_LINES", "folder_position_sigmas", "folder_survey", "read_sync_json",
            "position_errors"]

@@ -10,13 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
+from sblsim.models.declarations import ModelError
 from sblsim.models.sync.emissions import SyncTagsUnheard
 from sblsim.models.sync.resolution import RoundingError
+from sblsim.orchestrator.io.arguments import real_argument
 from sblsim.orchestrator.readers.deployments import Deployments
+from sblsim.orchestrator.readers.limits import MAX_HYDROPHONES, SOUND_SPEED_RANGE
+from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
 from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
-from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey
+from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey, read_sync_json
 
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
@@ -27,6 +31,8 @@ UNHEARD = "as logged (no sync tag heard)"
 NO_SYNC_TAG = "as logged (no sync tag)"
 #: The clocks' source where they are synchronised here from the deployments' sync tags.
 SYNCHRONISED_HERE = "synchronised here"
+#: The clocks' source where they are a synchronisation's folder given (``--sync DIR``).
+GIVEN = "given"
 
 
 def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, sound_speed: float | None,
@@ -52,12 +58,12 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         # the survey error its synchronisation saw and took, as one made here would; on refined positions, each one's
         each = None if refined is None else folder_position_sigmas(sync_dir, table["receiver"].astype(str).tolist())
         taken = None if refined is not None else folder_survey(sync_dir)
-        return clocks, table, {"source": "given", "folder": str(sync_dir), "reference_receiver": clocks.reference(),
+        return clocks, table, {"source": GIVEN, "folder": str(sync_dir), "reference_receiver": clocks.reference(),
                                "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"} | (
             {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}) | (
-            {} if each is None else {"position_sigma_m": each}), None
+            {} if each is None else {"position_sigma_m": each}) | folder_speed(sync_dir), None
     rounded = unheard = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:
@@ -120,6 +126,41 @@ def estimated_speed(summary: dict) -> dict:
             "sound_speed_survey_sigma_m_s": survey}
 
 
+def folder_speed(folder: Path) -> dict:
+    """The sound speed a synchronisation's ``folder`` (``--sync DIR``) estimated and its σ, as :func:`estimated_speed`
+    gives them where the synchronisation is made here, from its ``sync.json`` read as anyone's
+    (:func:`~sblsim.orchestrator.sync.taken_survey.read_sync_json`): the numbers taken checked in their ranges,
+    nothing else in it read; nothing where the folder has no ``sync.json`` or its speed was given.
+
+    Raises
+    ------
+    ModelError
+        ``sync.json`` refused, or a number it holds for the speed outside its range (one line naming it).
+    """
+    data, shown = read_sync_json(folder)
+    speed = None if data is None else data.get("sound_speed")
+    if not isinstance(speed, dict) or speed.get("source") != "estimated" or speed.get("sound_speed_sigma_m_s") is None:
+        return {}
+    low, high = SOUND_SPEED_RANGE
+    c = real_argument(speed.get("sound_speed_m_s"), f"{shown} sound_speed.sound_speed_m_s", low, high, "m/s")
+    fit = real_argument(speed["sound_speed_sigma_m_s"], f"{shown} sound_speed.sound_speed_sigma_m_s", 0.0,
+                        high - low, "m/s")
+    seen = data.get("survey_error")
+    scale = seen.get("speed_scale_sigma_per_m") if isinstance(seen, dict) else None
+    scale = None if scale is None else real_argument(scale, f"{shown} survey_error.speed_scale_sigma_per_m", 0.0,
+                                                     1.0, "1/m")
+    taken = data.get("survey_sigma_m")
+    where = f"{shown} survey_sigma_m"
+    if isinstance(taken, dict):  # each receiver's
+        if len(taken) > MAX_HYDROPHONES:
+            raise ModelError(f"{where}: {len(taken)} receivers; allowed: at most {MAX_HYDROPHONES}")
+        taken = {k: real_argument(v, f"{where}[{str(k)[:40]!r}]", *SURVEY_SIGMA_RANGE, "m") for k, v in taken.items()}
+    elif taken is not None:
+        taken = real_argument(taken, where, *SURVEY_SIGMA_RANGE, "m")
+    return estimated_speed({"sound_speed": {"source": "estimated", "sound_speed_m_s": c, "sound_speed_sigma_m_s": fit},
+                            "survey_sigma_m": taken, "survey_error": {"speed_scale_sigma_per_m": scale}})
+
+
 def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:
     """The receivers' survey error [m per horizontal axis] a study's σ take: the one ``stated`` (0: none, the
     positions taken as exact), else, without the refinement (``refine``: its prior is the survey's), a given folder's
@@ -135,5 +176,5 @@ def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict
     return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
-__all__ = ["NO_SYNC_TAG", "SYNCHRONISED_HERE", "TOO_COARSE", "UNHEARD", "estimated_speed", "study_clocks",
-           "taken_survey"]
+__all__ = ["GIVEN", "NO_SYNC_TAG", "SYNCHRONISED_HERE", "TOO_COARSE", "UNHEARD", "estimated_speed", "folder_speed",
+           "study_clocks", "taken_survey"]

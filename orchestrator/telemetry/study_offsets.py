@@ -54,7 +54,7 @@ from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.clock_stretches import sparse_stretches, stretches_said
-from sblsim.orchestrator.telemetry.study_clocks import NO_SYNC_TAG, SYNCHRONISED_HERE, UNHEARD
+from sblsim.orchestrator.telemetry.study_clocks import GIVEN, NO_SYNC_TAG, SYNCHRONISED_HERE, UNHEARD
 from sblsim.orchestrator.telemetry.study_positions import pooled
 from sblsim.orchestrator.tracks.depth import undetermined_depth
 from sblsim.orchestrator.tracks.tracker import DEPTH_SIGMA
@@ -295,22 +295,23 @@ def interpolated(info: dict[str, Any]) -> list[tuple[float, float]]:
 
 def study_speed(info: dict[str, Any]) -> tuple[float, float] | None:
     """The study's own sound speed [m/s] and its σ [m/s] where its clocks were fitted with the speed's scale, from
-    its tags' pings (:func:`fit_clocks`) or its sync tags' arrivals (synchronised here, none given:
-    :func:`~sblsim.orchestrator.sync.run.synchronise`) (``info``: ``study.json``'s ``clocks``), each tag's fallback
-    in place of the default's (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`): its σ the fit's with
-    the largest a tag's own calibration is taken at (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`, in
-    quadrature: one speed for the season, and the sync tags' paths near the bottom, stand for the water a tag's
-    pings crossed no better than the weakest calibration a tag's pings give); None otherwise."""
-    fitted = info.get("source") in (FITTED, SYNCHRONISED_HERE)
+    its tags' pings (:func:`fit_clocks`) or its sync tags' arrivals (synchronised here or in a folder given, no speed
+    given: :func:`~sblsim.orchestrator.sync.run.synchronise`) (``info``: ``study.json``'s ``clocks``), each tag's
+    fallback in place of the default's (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`): its σ the
+    fit's with the largest a tag's own calibration is taken at
+    (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`, in quadrature: one speed for the season, and the sync
+    tags' paths near the bottom, stand for the water a tag's pings crossed no better than the weakest calibration a
+    tag's pings give); None otherwise."""
+    fitted = info.get("source") in (FITTED, SYNCHRONISED_HERE, GIVEN)
     sigma = info.get("sound_speed_sigma_m_s") if fitted else None
     return None if sigma is None else (float(info["sound_speed_m_s"]), float(np.hypot(sigma, MAX_SIGMA)))
 
 
 def fitted_options(info: dict[str, Any], moving: bool) -> dict[str, Any]:
-    """A tag's tracking options from the study's clocks fitted here (``info``: ``study.json``'s ``clocks``): a
+    """A tag's tracking options from the study's clocks fitted (``info``: ``study.json``'s ``clocks``): a
     moving tag's ``clocks_interpolated`` (:func:`interpolated`: clocks fitted from the tags' pings) and every tag's
-    ``study_speed`` (:func:`study_speed`: from the pings or the sync tags), each where there is one; none for clocks
-    taken as logged or given."""
+    ``study_speed`` (:func:`study_speed`: from the pings or the sync tags, here or in a folder given), each where
+    there is one; none for clocks taken as logged."""
     bent, speed = interpolated(info) if moving else [], study_speed(info)
     return ({"clocks_interpolated": bent} if bent else {}) | ({"study_speed": speed} if speed else {})
 

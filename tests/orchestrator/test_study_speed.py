@@ -22,7 +22,8 @@ WATER = 1480.0  # [m/s] the simulation's sound speed
 def test_the_speed_a_synchronisation_estimated_and_its_sigma():
     """The fit's σ and the survey's share (the speed times the survey error taken times the scale's σ per metre) in
     quadrature; each receiver's survey error as their RMS; nothing where the speed was given, taken from a series
-    or has no σ; a tag's options carry it with MAX_SIGMA in quadrature, for clocks synchronised here alone."""
+    or has no σ; a tag's options carry it with MAX_SIGMA in quadrature, for clocks synchronised here or given, not
+    for clocks taken as logged."""
     summary = {"sound_speed": {"source": "estimated", "sound_speed_m_s": 1476.8, "sound_speed_sigma_m_s": 0.3},
                "survey_sigma_m": 2.0, "survey_error": {"speed_scale_sigma_per_m": 0.001}}
     found = estimated_speed(summary)
@@ -39,7 +40,9 @@ def test_the_speed_a_synchronisation_estimated_and_its_sigma():
     info = {"source": SYNCHRONISED_HERE} | found
     speed = (1476.8, float(np.hypot(found["sound_speed_sigma_m_s"], MAX_SIGMA)))
     assert study_speed(info) == pytest.approx(speed) and fitted_options(info, True)["study_speed"] == speed
-    assert study_speed(info | {"source": "given"}) is None and fitted_options(info | {"source": "given"}, True) == {}
+    assert study_speed(info | {"source": "given"}) == pytest.approx(speed)
+    logged = info | {"source": "as logged"}
+    assert study_speed(logged) is None and fitted_options(logged, True) == {}
 
 
 def _study(tmp_path, seed: int, moved: float = 0.0, receivers: int = 4, tags: int = 3, days: float = 0.25):
@@ -112,3 +115,63 @@ def test_the_sync_tags_speed_is_as_uncertain_as_the_survey_makes_it(tmp_path, se
     assert abs(clocks["sound_speed_m_s"] - WATER) < 2.5 * np.hypot(clocks["sound_speed_sigma_m_s"], MAX_SIGMA), clocks
     for tag, rows in _errors(sim, out, clocks["reference_receiver"]).groupby("tag"):
         assert 0.3 <= rows["nees"].mean() <= 4.5, (tag, rows.describe())
+
+
+def test_a_synchronisation_s_folder_given_gives_its_speed_as_one_made_here(tmp_path):
+    """``sblsim sync`` on four receivers, its folder given to the study (``--sync DIR``): the clocks' speed and σ
+    those of the study synchronised here, and its tag tracked at that speed (the same as there, to a millimetre
+    per second)."""
+    from sblsim.orchestrator import cli
+
+    sim = simulate_study(n_receivers=4, n_tags=1, days=0.05, redeployed=0, seed=5, offset=0.01, drift=1e-7)
+    files = sim.write(tmp_path / "in", "glatos")
+    assert cli.main(["sync", str(files["detections"]), "--receivers", str(files["deployments"]), "--out",
+                     str(tmp_path / "sync")]) == 0
+    made = {}
+    for name, extra in (("here", []), ("given", ["--sync", str(tmp_path / "sync")])):
+        assert cli.main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
+                         str(files["tags"]), "--out", str(tmp_path / name), *extra]) == 0
+        made[name] = (json.loads((tmp_path / name / "study.json").read_text())["clocks"],
+                      pd.read_csv(tmp_path / name / "tags.csv"))
+    (here, here_tags), (given, given_tags) = made["here"], made["given"]
+    assert given["source"] == "given" and here["source"] == SYNCHRONISED_HERE
+    for key in ("sound_speed_m_s", "sound_speed_sigma_m_s", "sound_speed_survey_sigma_m_s"):
+        assert given[key] == pytest.approx(here[key], rel=1e-9), key
+    assert (given_tags["sound_speed_source"] == "fallback").all()
+    np.testing.assert_allclose(given_tags["sound_speed_m_s"], here_tags["sound_speed_m_s"], rtol=0, atol=1e-3)
+    np.testing.assert_allclose(given_tags["sound_speed_m_s"], given["sound_speed_m_s"], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("field, value, says", [
+    ("sound_speed_m_s", 1e9, "sound_speed.sound_speed_m_s: 1000000000.0 is outside the allowed range [1300, 1700] m/s"),
+    ("sound_speed_sigma_m_s", "x", "sound_speed.sound_speed_sigma_m_s: 'x' is not a number"),
+    ("speed_scale_sigma_per_m", -1.0,
+     "survey_error.speed_scale_sigma_per_m: -1.0 is outside the allowed range [0, 1] 1/m"),
+    ("survey_sigma_m", {"a": 1e6}, "survey_sigma_m['a']: 1000000.0 is outside the allowed range [0, 1000] m"),
+])
+def test_a_folder_s_speed_out_of_its_range_is_refused_in_one_line(tmp_path, field, value, says):
+    """A ``sync.json`` whose speed's numbers are not numbers or outside their ranges is refused naming the field
+    and the range (never taken as a tag's prior); one that estimated none gives nothing."""
+    from sblsim.models.declarations import ModelError
+    from sblsim.orchestrator.telemetry.study_clocks import folder_speed
+
+    data = {"sound_speed": {"source": "estimated", "sound_speed_m_s": 1476.8, "sound_speed_sigma_m_s": 0.3},
+            "survey_sigma_m": 2.0, "survey_error": {"speed_scale_sigma_per_m": 0.001}}
+    (tmp_path / "sync.json").write_text(json.dumps(data))
+    assert folder_speed(tmp_path)["sound_speed_sigma_m_s"] == pytest.approx(np.hypot(0.3, 1476.8 * 2.0 * 0.001))
+    bad = json.loads(json.dumps(data))
+    if field.startswith("sound_speed"):
+        bad["sound_speed"][field] = value
+    elif field == "speed_scale_sigma_per_m":
+        bad["survey_error"][field] = value
+    else:
+        bad[field] = value
+    (tmp_path / "sync.json").write_text(json.dumps(bad))
+    with pytest.raises(ModelError, match="sync.json") as refused:
+        folder_speed(tmp_path)
+    assert says in str(refused.value) and "\n" not in str(refused.value)
+    (tmp_path / "sync.json").write_text(json.dumps(data | {"sound_speed": {"source": "given",
+                                                                             "sound_speed_m_s": 1480.0}}))
+    assert folder_speed(tmp_path) == {}
+    (tmp_path / "sync.json").unlink()
+    assert folder_speed(tmp_path) == {}
