@@ -13,6 +13,7 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.emissions import SyncTagsUnheard
 from sblsim.models.sync.resolution import RoundingError
+from sblsim.models.sync.survey_error import Z_SEEN
 from sblsim.orchestrator.io.arguments import real_argument
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.limits import MAX_HYDROPHONES, SOUND_SPEED_RANGE
@@ -109,21 +110,29 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
 def estimated_speed(summary: dict) -> dict:
     """The sound speed [m/s] a synchronisation estimated with its clocks (``summary``: its ``sync.json``'s) and its
     σ [m/s] (``study.json``'s ``clocks``: each tag's fallback, :func:`~.study_offsets.study_speed`): the fit's and
-    the survey error it took (``survey_sigma_m``; each receiver's: their RMS) through the array's scale
-    (:mod:`sblsim.models.sync.survey_error`, ``speed_scale_sigma_per_m``), in quadrature: a position off stretches
-    the sync tags' ranges, which the speed takes; the fit's σ alone does not count it. Nothing (an empty dict) where
-    the speed was given or the fit has no σ."""
+    the survey error's share through the array's scale (:mod:`sblsim.models.sync.survey_error`,
+    ``speed_scale_sigma_per_m``), in quadrature: a position off stretches the sync tags' ranges, which the speed
+    takes; the fit's σ alone does not count it. The survey error is the one taken (``survey_sigma_m``; each
+    receiver's: their RMS), else the one seen, else the most the residuals' test could have missed
+    (:data:`~sblsim.models.sync.survey_error.Z_SEEN` standard errors); where neither that nor the scale is
+    determined (too few pairs), the σ is None: the speed is said, not taken. Nothing (an empty dict) where the speed
+    was given or the fit has no σ."""
     speed = summary.get("sound_speed") or {}
     fit = speed.get("sound_speed_sigma_m_s")
     if speed.get("source") != "estimated" or fit is None:
         return {}
     c = float(speed["sound_speed_m_s"])
-    scale = (summary.get("survey_error") or {}).get("speed_scale_sigma_per_m")
-    taken = summary.get("survey_sigma_m") or 0.0  # (each receiver's: their RMS)
-    taken = float(np.sqrt(np.mean(np.square(list(taken.values()))))) if isinstance(taken, dict) else float(taken)
-    survey = c * taken * (0.0 if scale is None else float(scale))
-    return {"sound_speed_m_s": c, "sound_speed_sigma_m_s": float(np.hypot(fit, survey)),
-            "sound_speed_survey_sigma_m_s": survey}
+    seen = summary.get("survey_error") or {}
+    taken = summary.get("survey_sigma_m")  # (each receiver's: their RMS)
+    if isinstance(taken, dict):
+        taken = float(np.sqrt(np.mean(np.square(list(taken.values())))))
+    elif taken is None:
+        taken = seen.get("survey_sigma_m") if seen.get("seen") else None if seen.get("survey_sigma_se_m") is None \
+            else Z_SEEN * float(seen["survey_sigma_se_m"])
+    scale = seen.get("speed_scale_sigma_per_m") if taken else 0.0
+    share = None if taken is None or scale is None else c * float(taken) * float(scale)
+    return {"sound_speed_m_s": c, "sound_speed_sigma_m_s": None if share is None else float(np.hypot(fit, share)),
+            "sound_speed_survey_sigma_m_s": share}
 
 
 def folder_speed(folder: Path) -> dict:
@@ -145,10 +154,12 @@ def folder_speed(folder: Path) -> dict:
     c = real_argument(speed.get("sound_speed_m_s"), f"{shown} sound_speed.sound_speed_m_s", low, high, "m/s")
     fit = real_argument(speed["sound_speed_sigma_m_s"], f"{shown} sound_speed.sound_speed_sigma_m_s", 0.0,
                         high - low, "m/s")
-    seen = data.get("survey_error")
-    scale = seen.get("speed_scale_sigma_per_m") if isinstance(seen, dict) else None
-    scale = None if scale is None else real_argument(scale, f"{shown} survey_error.speed_scale_sigma_per_m", 0.0,
-                                                     1.0, "1/m")
+    seen = data.get("survey_error") if isinstance(data.get("survey_error"), dict) else {}
+    checked = {"seen": seen.get("seen") is True}
+    for key, high, unit in (("speed_scale_sigma_per_m", 1.0, "1/m"), ("survey_sigma_se_m", 1e300, "m"),
+                            ("survey_sigma_m", SURVEY_SIGMA_RANGE[1], "m")):
+        if seen.get(key) is not None:
+            checked[key] = real_argument(seen[key], f"{shown} survey_error.{key}", 0.0, high, unit)
     taken = data.get("survey_sigma_m")
     where = f"{shown} survey_sigma_m"
     if isinstance(taken, dict):  # each receiver's
@@ -158,7 +169,7 @@ def folder_speed(folder: Path) -> dict:
     elif taken is not None:
         taken = real_argument(taken, where, *SURVEY_SIGMA_RANGE, "m")
     return estimated_speed({"sound_speed": {"source": "estimated", "sound_speed_m_s": c, "sound_speed_sigma_m_s": fit},
-                            "survey_sigma_m": taken, "survey_error": {"speed_scale_sigma_per_m": scale}})
+                            "survey_sigma_m": taken, "survey_error": checked})
 
 
 def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:

@@ -50,7 +50,7 @@ from sblsim.models.tracking.depth import plane_prior
 from sblsim.models.tracking.fix import fix_pings
 from sblsim.models.tracking.held_out import HELD_OUT_GAIN, held_out
 from sblsim.models.tracking.receiver_positions import refine_receivers
-from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED
+from sblsim.models.tracking.sound_speed import DEFAULT_SOUND_SPEED, fallback_prior
 from sblsim.models.tracking.timing import SIGMA_TOA
 from sblsim.orchestrator.sync.clocks import Clocks, logged_clocks
 from sblsim.orchestrator.telemetry.clock_stretches import sparse_stretches, stretches_said
@@ -298,13 +298,14 @@ def study_speed(info: dict[str, Any]) -> tuple[float, float] | None:
     its tags' pings (:func:`fit_clocks`) or its sync tags' arrivals (synchronised here or in a folder given, no speed
     given: :func:`~sblsim.orchestrator.sync.run.synchronise`) (``info``: ``study.json``'s ``clocks``), each tag's
     fallback in place of the default's (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`): its σ the
-    fit's with the largest a tag's own calibration is taken at
-    (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`, in quadrature: one speed for the season, and the sync
-    tags' paths near the bottom, stand for the water a tag's pings crossed no better than the weakest calibration a
-    tag's pings give); None otherwise."""
+    fit's with the most a tag's own calibration is taken at (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`,
+    in quadrature: one speed for the season, and the sync tags' paths near the bottom, stand for the water a tag's
+    pings crossed no better than the weakest calibration); None otherwise, or where that σ is not below the
+    default's."""
     fitted = info.get("source") in (FITTED, SYNCHRONISED_HERE, GIVEN)
     sigma = info.get("sound_speed_sigma_m_s") if fitted else None
-    return None if sigma is None else (float(info["sound_speed_m_s"]), float(np.hypot(sigma, MAX_SIGMA)))
+    sigma = None if sigma is None else float(np.hypot(sigma, MAX_SIGMA))
+    return None if sigma is None or not sigma < fallback_prior()[1] else (float(info["sound_speed_m_s"]), sigma)
 
 
 def fitted_options(info: dict[str, Any], moving: bool) -> dict[str, Any]:
