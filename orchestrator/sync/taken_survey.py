@@ -58,9 +58,10 @@ def read_sync_json(folder: Path | str) -> tuple[dict | None, str]:
     return data, shown
 
 
-def folder_survey(folder: Path | str) -> float | None:
+def folder_survey(folder: Path | str, read: tuple[dict | None, str] | None = None) -> float | None:
     """The survey error [m per horizontal axis] a synchronisation's ``folder`` took as seen (module docstring);
-    None where it took none (stated, not seen, or no ``sync.json``).
+    None where it took none (stated, not seen, or no ``sync.json``). ``read``: its ``sync.json`` as
+    :func:`read_sync_json` gave it already (else read here).
 
     Raises
     ------
@@ -69,7 +70,7 @@ def folder_survey(folder: Path | str) -> float | None:
         error's range (:data:`~sblsim.orchestrator.readers.receivers_file.SURVEY_SIGMA_RANGE`) where it says it took
         one (one line).
     """
-    data, shown = read_sync_json(folder)
+    data, shown = read_sync_json(folder) if read is None else read
     if data is None or data.get("survey_sigma_from") != "seen":
         return None
     return real_argument(data.get("survey_sigma_m"), f"{shown} survey_sigma_m", *SURVEY_SIGMA_RANGE, "m")

@@ -58,13 +58,14 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         missing = sorted(set(table["receiver"]) - set(clocks.receivers))
         # the survey error its synchronisation saw and took, as one made here would; on refined positions, each one's
         each = None if refined is None else folder_position_sigmas(sync_dir, table["receiver"].astype(str).tolist())
-        taken = None if refined is not None else folder_survey(sync_dir)
+        read = read_sync_json(sync_dir)  # (once: its survey error and its speed)
+        taken = None if refined is not None else folder_survey(sync_dir, read)
         return clocks, table, {"source": GIVEN, "folder": str(sync_dir), "reference_receiver": clocks.reference(),
                                "receivers": len(clocks.receivers),
                                "not_synchronised": missing,
                                "positions": "refined (positions.csv)" if refined is not None else "the table's"} | (
             {} if taken is None else {"survey_sigma_m": taken, "survey_sigma_from": "seen"}) | (
-            {} if each is None else {"position_sigma_m": each}) | folder_speed(sync_dir), None
+            {} if each is None else {"position_sigma_m": each}) | folder_speed(sync_dir, read), None
     rounded = unheard = None
     if (table["sync_tag"] != "").any() and len(table) > 1:
         try:
@@ -126,27 +127,29 @@ def estimated_speed(summary: dict) -> dict:
     taken = summary.get("survey_sigma_m")  # (each receiver's: their RMS)
     if isinstance(taken, dict):
         taken = float(np.sqrt(np.mean(np.square(list(taken.values())))))
-    elif taken is None:
-        taken = seen.get("survey_sigma_m") if seen.get("seen") else None if seen.get("survey_sigma_se_m") is None \
-            else Z_SEEN * float(seen["survey_sigma_se_m"])
+    elif taken is None and seen.get("seen"):
+        taken = seen.get("survey_sigma_m")
+    elif taken is None and seen.get("survey_sigma_se_m") is not None:  # what the test could have missed
+        taken = Z_SEEN * float(seen["survey_sigma_se_m"])
     scale = seen.get("speed_scale_sigma_per_m") if taken else 0.0
     share = None if taken is None or scale is None else c * float(taken) * float(scale)
     return {"sound_speed_m_s": c, "sound_speed_sigma_m_s": None if share is None else float(np.hypot(fit, share)),
             "sound_speed_survey_sigma_m_s": share}
 
 
-def folder_speed(folder: Path) -> dict:
+def folder_speed(folder: Path, read: tuple[dict | None, str] | None = None) -> dict:
     """The sound speed a synchronisation's ``folder`` (``--sync DIR``) estimated and its σ, as :func:`estimated_speed`
     gives them where the synchronisation is made here, from its ``sync.json`` read as anyone's
-    (:func:`~sblsim.orchestrator.sync.taken_survey.read_sync_json`): the numbers taken checked in their ranges,
-    nothing else in it read; nothing where the folder has no ``sync.json`` or its speed was given.
+    (:func:`~sblsim.orchestrator.sync.taken_survey.read_sync_json`; ``read``: as it gave it already, else read
+    here): the numbers taken checked in their ranges, nothing else in it read; nothing where the folder has no
+    ``sync.json`` or its speed was given.
 
     Raises
     ------
     ModelError
         ``sync.json`` refused, or a number it holds for the speed outside its range (one line naming it).
     """
-    data, shown = read_sync_json(folder)
+    data, shown = read_sync_json(folder) if read is None else read
     speed = None if data is None else data.get("sound_speed")
     if not isinstance(speed, dict) or speed.get("source") != "estimated" or speed.get("sound_speed_sigma_m_s") is None:
         return {}
