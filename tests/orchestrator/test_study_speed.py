@@ -14,6 +14,7 @@ import pytest
 from sblsim.models.sync.survey_error import Z_SEEN
 from sblsim.models.tracking.calibration import MAX_SIGMA
 from sblsim.models.tracking.sound_speed import fallback_prior
+from sblsim.orchestrator.commands.sync import speed_sigma_text
 from sblsim.orchestrator.telemetry.simulate import simulate_study
 from sblsim.orchestrator.telemetry.study_clocks import SYNCHRONISED_HERE, estimated_speed
 from sblsim.orchestrator.telemetry.study_offsets import fitted_options, study_speed
@@ -49,6 +50,7 @@ def test_the_speed_a_synchronisation_estimated_and_its_sigma():
         said = estimated_speed(undetermined)
         assert said["sound_speed_m_s"] == 1476.8 and said["sound_speed_sigma_m_s"] is None
         assert study_speed({"source": SYNCHRONISED_HERE} | said) is None
+        assert "not bounded" in speed_sigma_text(said, 0.3) and not speed_sigma_text(said, 0.3).startswith(", σ")
     for source in ("given", "series"):
         assert estimated_speed(summary | {"sound_speed": {"source": source, "sound_speed_m_s": 1480.0}}) == {}
     assert estimated_speed(summary | {"sound_speed": summary["sound_speed"] | {"sound_speed_sigma_m_s": None}}) == {}
@@ -144,16 +146,26 @@ def test_the_sync_tags_speed_is_as_uncertain_as_the_survey_makes_it(tmp_path, se
         assert 0.3 <= rows["nees"].mean() <= 4.5, (tag, rows.describe())
 
 
-def test_a_synchronisation_s_folder_given_gives_its_speed_as_one_made_here(tmp_path):
+def test_a_synchronisation_s_folder_given_gives_its_speed_as_one_made_here(tmp_path, capsys):
     """``sblsim sync`` on four receivers, its folder given to the study (``--sync DIR``): the clocks' speed and σ
     those of the study synchronised here, and its tag tracked at that speed (the same as there, to a millimetre
-    per second)."""
+    per second); the sync's console says the speed's whole σ, the fit's and the survey's share (recomputed here
+    from its ``sync.json``)."""
     from sblsim.orchestrator import cli
 
     sim = simulate_study(n_receivers=4, n_tags=1, days=0.15, redeployed=0, seed=5, offset=0.01, drift=1e-7)
     files = sim.write(tmp_path / "in", "glatos")
     assert cli.main(["sync", str(files["detections"]), "--receivers", str(files["deployments"]), "--out",
                      str(tmp_path / "sync")]) == 0
+    said = capsys.readouterr().out.splitlines()[0]
+    data = json.loads((tmp_path / "sync" / "sync.json").read_text())
+    speed, seen = data["sound_speed"], data["survey_error"]
+    survey = data.get("survey_sigma_m") or (seen["survey_sigma_m"] if seen["seen"]
+                                            else Z_SEEN * seen["survey_sigma_se_m"])
+    share = speed["sound_speed_m_s"] * survey * seen["speed_scale_sigma_per_m"]
+    assert (f"sound speed {speed['sound_speed_m_s']:.1f} m/s (estimated), σ "
+            f"{np.hypot(speed['sound_speed_sigma_m_s'], share):.2g} m/s (the fit's "
+            f"{speed['sound_speed_sigma_m_s']:.2g}, the survey's share {share:.2g})") in said, said
     made = {}
     for name, extra in (("here", []), ("given", ["--sync", str(tmp_path / "sync")])):
         assert cli.main(["track", str(files["detections"]), "--receivers", str(files["deployments"]), "--tags",
