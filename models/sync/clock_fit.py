@@ -56,6 +56,9 @@ class ClockFit:
     shift_covariance_all : numpy.ndarray or None
         (2R, 2R) [m²] with refined positions, all the shifts' joint covariance (x then y per receiver; the
         blocks of ``shift_covariance`` on its diagonal), else None.
+    window_slowness : numpy.ndarray or None
+        (W, 2) [s/m] a season fitted in windows (:mod:`sblsim.models.sync.windows`) with its slowness estimated:
+        each window's slowness and sigma (NaN: none); else None.
     """
 
     edges: np.ndarray
@@ -81,6 +84,7 @@ class ClockFit:
     breaks: list | None = None
     part: np.ndarray | None = None
     shift_covariance_all: np.ndarray | None = None
+    window_slowness: np.ndarray | None = None
 
     def rows_at(self, receiver: np.ndarray, time: np.ndarray, part: np.ndarray | None = None) -> np.ndarray:
         """(n,) int, the row of :attr:`knots` that holds ``receiver`` (n,) int's clock at its own ``time`` (n,)

@@ -28,10 +28,11 @@ clocks kept over its own span alone:
 
 Each arrival's residual, weight and rejection are its own emission's window's; each clock's noise scale the
 arrivals-weighted root mean square of its windows' scales; an estimated slowness each window's own (the water
-changes over a season), the fit's the inverse-variance mean of the windows'. The overlap's length is the choice that
-makes the windows' clocks the whole fit's: at :data:`OVERLAP_HOURS` and hourly bins the two agree within a tenth of
-the offsets' sigma on a simulated fortnight (the tests). Units: seconds [s] throughout, times from the caller's
-origin.
+changes over a season), the fit's the windows' as a random effect (:func:`season_slowness`: where the windows
+disagree beyond their sigmas, each one a draw of the season's water, their spread said). The overlap's length is
+the choice that makes the windows' clocks the whole fit's: at :data:`OVERLAP_HOURS` and hourly bins the two agree
+within a tenth of the offsets' sigma on a simulated fortnight (the tests). Units: seconds [s] throughout, times
+from the caller's origin.
 """
 
 from __future__ import annotations
@@ -343,12 +344,12 @@ def _joined(fits, windows: Windows, receiver: np.ndarray, instant: np.ndarray, e
             if lo <= instant_b < hi:
                 breaks.append(replace(b, before=_row_for(where, site, span, i, b, True),
                                       after=_row_for(where, site, span, i, b, False)))
-    slowness, slowness_sigma = _slowness(fits)
+    slowness, slowness_sigma, each = _slowness(fits)
     plain = len(order) == n_rows and not breaks and np.isinf(span).all()  # one row per receiver, as one fit's
     drift = np.diff(knots, axis=1) / width
     fit = ClockFit(edges, knots, knot_sigma, drift, drift_sigma, counts, rows_of["emission_time"], rows_of["residual"],
                    rows_of["standardised"], rows_of["kept"], scale, slowness, slowness_sigma,
-                   max(f.iterations for _, _, f in fits))
+                   max(f.iterations for _, _, f in fits), window_slowness=each)
     if plain:
         return fit
     return replace(fit, site=site, span=span, clock=rows_of["clock"], breaks=breaks,
@@ -393,18 +394,50 @@ def _row_for(where: dict, site: np.ndarray, span: np.ndarray, i: int, b, before:
     return int(mine[np.argmin(np.where(np.isfinite(gap), gap, np.inf))])
 
 
-def _slowness(fits) -> tuple[float | None, float | None]:
-    """The windows' estimated slownesses [s/m] as one: their inverse-variance mean and its sigma (the mean and None
-    where a window gives no sigma); None, None where given."""
+def _slowness(fits) -> tuple[float | None, float | None, np.ndarray | None]:
+    """The windows' estimated slownesses [s/m] as one (:func:`season_slowness`: the mean, its sigma; the mean and
+    None where a window gives no sigma) and each window's with its sigma, (W, 2) (NaN: none); None, None, None where
+    given."""
     values = [(f.slowness, f.slowness_sigma) for _, _, f in fits if f.slowness is not None]
     if not values:
-        return None, None
+        return None, None, None
     s = np.array([v for v, _ in values], float)
     sigma = np.array([np.nan if e is None else e for _, e in values], float)
+    each = np.c_[s, sigma]
     if not (np.isfinite(sigma) & (sigma > 0)).all():
-        return float(s.mean()), None
-    w = sigma ** -2.0
-    return float(np.sum(w * s) / w.sum()), float(w.sum() ** -0.5)
+        return float(s.mean()), None, each
+    mean, spread, _ = season_slowness(s, sigma)
+    return mean, spread, each
 
 
-__all__ = ["OVERLAP_HOURS", "WINDOW_DAYS", "Windows", "fit_in_windows", "season_windows"]
+def season_slowness(values: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
+    """A season's slowness from its windows' estimates: the water's changes over the season as a random effect.
+
+    The windows' slownesses ``values`` (W,) [s/m] with their sigmas ``sigma`` (W,) [s/m] differ by more than their
+    sigmas where the water changes from week to week; the between-windows variance τ² is DerSimonian and Laird's
+    moment estimate, ``max(0, (Q − (W − 1)) / (Σw − Σw² / Σw))`` with ``w = 1 / σ²`` and ``Q`` the weighted squares
+    about the inverse-variance mean, the season's slowness the mean weighted by ``1 / (σ² + τ²)`` and its sigma
+    ``√(1 / Σ(1 / (σ² + τ²)))``: each window counts as one draw of the season's water, not by its own tiny sigma
+    alone. τ is the windows' spread (the water at a moment is that far from the season's mean). Where the windows
+    agree (τ² = 0) the inverse-variance mean and its sigma.
+
+    Returns
+    -------
+    mean, sigma, tau : float
+        [s/m] the season's slowness, its sigma, and the windows' spread τ.
+
+    References
+    ----------
+    DerSimonian & Laird, "Meta-analysis in clinical trials", Controlled Clinical Trials 7(3), 177-188, 1986.
+    """
+    values, w = np.asarray(values, float), np.asarray(sigma, float) ** -2.0
+    fixed = np.sum(w * values) / w.sum()
+    q = float(np.sum(w * (values - fixed) ** 2))
+    tau2 = max(0.0, (q - (len(values) - 1)) / (w.sum() - np.sum(w**2) / w.sum())) if len(values) > 1 else 0.0
+    if tau2 == 0.0:
+        return float(fixed), float(w.sum() ** -0.5), 0.0
+    random = 1.0 / (1.0 / w + tau2)
+    return float(np.sum(random * values) / random.sum()), float(random.sum() ** -0.5), float(np.sqrt(tau2))
+
+
+__all__ = ["OVERLAP_HOURS", "WINDOW_DAYS", "Windows", "fit_in_windows", "season_slowness", "season_windows"]

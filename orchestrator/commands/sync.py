@@ -212,16 +212,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
 
 
-def speed_sigma_text(speed: dict, fit: float | None) -> str:
+def speed_sigma_text(speed: dict, fit: float | None, spread: float | None = None) -> str:
     """The estimated sound speed's σ as the console says it: the whole σ a study's tags take as their fallback's
-    (``speed``: :func:`~sblsim.orchestrator.telemetry.study_clocks.estimated_speed`), the fit's and the survey's
-    share in it [m/s]; or why none is taken (the survey's share not bounded); nothing without the fit's σ."""
+    (``speed``: :func:`~sblsim.orchestrator.telemetry.study_clocks.estimated_speed`), the fit's (with a season's
+    windows' ``spread`` in it, where they disagree: :func:`~sblsim.models.sync.windows.season_slowness`) and the
+    survey's share in it [m/s]; or why none is taken (the survey's share not bounded); nothing without the fit's σ."""
     if fit is None:
         return ""
+    fitted = f"the fit's {fit:.2g}" + (f" with the windows' spread {spread:.2g}" if spread else "")
     if speed.get("sound_speed_sigma_m_s") is None:
-        return (f", the fit's σ {fit:.2g} m/s; the survey's share of its error not bounded (too few pairs of a sync "
-                "tag and another receiver): a study's tags keep the default's")
-    return (f", σ {speed['sound_speed_sigma_m_s']:.2g} m/s (the fit's {fit:.2g}, the survey's share "
+        return (f", {fitted} m/s; the survey's share of its error not bounded (too few pairs of a sync tag and "
+                "another receiver): a study's tags keep the default's")
+    return (f", σ {speed['sound_speed_sigma_m_s']:.2g} m/s ({fitted}, the survey's share "
             f"{speed['sound_speed_survey_sigma_m_s']:.2g})")
 
 
@@ -246,7 +248,8 @@ def main(args: argparse.Namespace) -> int:
     speed_text = (f"{c['sound_speed_m_s']:.1f} m/s ({c['source']})" if "sound_speed_m_s" in c
                   else "from the series")
     if c.get("source") == "estimated":
-        speed_text += speed_sigma_text(estimated_speed(s), c.get("sound_speed_sigma_m_s"))
+        speed_text += speed_sigma_text(estimated_speed(s), c.get("sound_speed_sigma_m_s"),
+                                       c.get("windows_spread_m_s"))
     print(f"sync of {args.detections}: {d['sync_arrivals']} sync-tag arrivals of {d['rows']} detections, "
           f"{len(s['synchronised'])} receivers synchronised against {s['reference_receiver']} in "
           f"{len(s['bin_edges']) - 1} bins of {s['bin_hours']:g} h, sound speed {speed_text}, in "

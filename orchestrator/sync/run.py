@@ -478,6 +478,11 @@ def _synchronise(detections: Detections, hydrophones: pd.DataFrame, sound_speed:
     if windows is not None:
         summary["windows"] = {"days": float(window_days), "overlap_hours": OVERLAP_HOURS, "count": len(windows),
                               "edges": (windows.edges + origin).tolist()}
+        if fit.window_slowness is not None:  # each window's own sound speed (the season's water) and its σ
+            s, e = fit.window_slowness.T
+            summary["windows"] |= {"sound_speed_m_s": (1.0 / s).tolist(),
+                                   "sound_speed_sigma_m_s": [None if not np.isfinite(v) else float(v)
+                                                             for v in e / s**2]}
     return SyncOutcome(summary, offsets, residuals, sync_tags, receivers, fit, origin, refined)
 
 

@@ -9,7 +9,8 @@ uniform in ±``offset``, ``b`` in ±``drift``, ``w`` in ±``wander``, ``T`` in o
 crystal's rate following the water's temperature, which a drift corrected at offload as a line leaves; a redeployed
 receiver's clock set again at its redeployment). A receiver hears an
 emission at distance ``d`` with the logistic detection range curve ``1 / (1 + exp((d − r50) / (r50 / 6)))``
-(50 % at ``range_50``), along the straight line at ``sound_speed``, with a Gaussian timing noise ``sigma_toa``;
+(50 % at ``range_50``), along the straight line at ``sound_speed`` (one, or the water's at each emission: a season's
+water warms and cools), with a Gaussian timing noise ``sigma_toa``;
 only while it is deployed. A redeployed receiver, out of the water for an hour (a tenth of a short study), logs
 its own sync tag on deck between its two deployments: detections a study must set aside. The animals move along
 smooth paths inside the array (sums of sinusoids of periods of hours), emitting with a stable (``sbi``), random
@@ -23,7 +24,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -244,7 +245,8 @@ def _emissions(kind: str, span: float, rng: np.random.Generator, figures) -> np.
 
 def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, redeployed: int = 2, seed: int = 0,
                    spacing: float = 150.0, centre: tuple[float, float] = (60.38, 5.34),
-                   start: str = "2024-06-03T00:00:00Z", sound_speed: float = 1480.0,
+                   start: str = "2024-06-03T00:00:00Z",
+                   sound_speed: float | Callable[[np.ndarray], np.ndarray] = 1480.0,
                    sigma_toa: float | Sequence[float] = 0.15e-3,
                    range_50: float = 220.0, offset: float = 2.0, drift: float = 20e-6,
                    wander: float = 0.0) -> SimulatedStudy:
@@ -265,8 +267,9 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     spacing, centre, start
         The grid's spacing [m], its centre (latitude, longitude [°]) and the study's start (ISO 8601 UTC).
     sound_speed, sigma_toa, range_50
-        [m/s], the timing noise [s] (one, or each receiver's: ``n_receivers`` values, a redeployed receiver's the same
-        at both its stations), the detection range curve's 50 % range [m].
+        [m/s] (one, or a function of the emissions' true times (n,) [s from the start] giving each one's (n,)), the
+        timing noise [s] (one, or each receiver's: ``n_receivers`` values, a redeployed receiver's the same at both
+        its stations), the detection range curve's 50 % range [m].
     offset, drift, wander
         The clocks' offsets [s], drifts [s/s] and the amplitudes [s] of their wander about the line (a period of one
         to three days: the module docstring), uniform in ±.
@@ -322,7 +325,8 @@ def simulate_study(n_receivers: int = 20, n_tags: int = 100, days: float = 7.0, 
     def heard(tau_e: np.ndarray, where: np.ndarray, transmitter: str, own: int | None = None) -> None:
         """The detections of emissions at ``tau_e`` (n,) from ``where`` (n, 2) by every deployment in the water."""
         d = np.linalg.norm(where[:, None, :] - positions[None], axis=2)
-        arrival = tau_e[:, None] + d / sound_speed + rng.normal(0, sigma_toa, d.shape)
+        c = sound_speed(tau_e)[:, None] if callable(sound_speed) else sound_speed
+        arrival = tau_e[:, None] + d / c + rng.normal(0, sigma_toa, d.shape)
         p = 1 / (1 + np.exp((d - range_50) / (range_50 / 6)))
         if own is not None:
             p[:, own] = 0.9  # a receiver hears its own sync tag most of the time

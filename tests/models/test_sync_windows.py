@@ -201,3 +201,32 @@ def test_a_refit_for_its_clocks_alone_holds_no_arrivals_and_the_same_clocks(jump
     assert [b.time for b in kept.breaks or []] == [b.time for b in alone.breaks or []]
     picked = without & (rows != reference)
     assert np.array_equal(kept.offset(rows[picked], t[picked]), alone.offset(rows[picked], t[picked]))
+
+
+def test_a_season_s_slowness_from_windows_that_disagree_is_the_water_s_at_any_moment():
+    """:func:`~sblsim.models.sync.windows.season_slowness` against statsmodels' DerSimonian-Laird random-effects
+    combination (its mean, τ² and the mean's standard error): windows whose slownesses differ by far more than their
+    sigmas (a season's water warming) give a sigma of their spread over √W, not the inverse-variance mean's, and τ
+    near their spread; windows that agree (Q below its degrees of freedom) give the inverse-variance mean and its
+    sigma exactly; one window its own."""
+    from statsmodels.stats.meta_analysis import combine_effects
+
+    from sblsim.models.sync.windows import season_slowness
+
+    rng = np.random.default_rng(3)
+    speeds = 1485.0 + 15.0 * np.sin(np.linspace(0.0, 2 * np.pi, 13))  # [m/s] a quarter's weeks
+    values, sigma = 1.0 / speeds, rng.uniform(0.02, 0.06, 13) / speeds**2
+    mean, spread, tau = season_slowness(values, sigma)
+    reference = combine_effects(values, sigma**2, method_re="dl")
+    assert mean == pytest.approx(reference.mean_effect_re, rel=1e-12)
+    assert tau == pytest.approx(np.sqrt(reference.tau2), rel=1e-9)
+    assert spread == pytest.approx(reference.sd_eff_w_re, rel=1e-9)
+    c2 = 1485.0**2  # [m/s per s/m] slowness to speed
+    assert tau * c2 == pytest.approx(np.std(speeds, ddof=1), rel=0.05)
+    assert spread * c2 > 0.8 * np.std(speeds) / np.sqrt(13) and spread > 20 * sigma.max()
+    w = sigma**-2.0
+    agreeing = np.sum(w * values) / w.sum() + np.array([1.0, -1.0, 0.5, -0.5, 0.0]) * 0.3 * sigma[:5]
+    mean, spread, tau = season_slowness(agreeing, sigma[:5])
+    fixed = np.sum(w[:5] * agreeing) / w[:5].sum()
+    assert tau == 0.0 and mean == pytest.approx(fixed, rel=1e-15) and spread == pytest.approx(w[:5].sum() ** -0.5)
+    assert season_slowness(values[:1], sigma[:1]) == pytest.approx((values[0], sigma[0], 0.0))
