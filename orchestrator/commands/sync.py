@@ -19,7 +19,7 @@ from sblsim.orchestrator.cosim.config import ConfigError
 from sblsim.orchestrator.io.arguments import flag_argument, path_argument, prepare_out, real_argument, text_argument
 from sblsim.orchestrator.io.output import folder_name
 from sblsim.orchestrator.readers.formats import FORMATS
-from sblsim.orchestrator.sync.survey_console import survey_line
+from sblsim.orchestrator.sync.survey_console import speed_said, survey_line
 from sblsim.orchestrator.sync.toa_console import say_warnings
 from sblsim.orchestrator.telemetry.study_options import survey_sigma_argument
 
@@ -212,21 +212,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace an earlier synchronisation in --out")
 
 
-def speed_sigma_text(speed: dict, fit: float | None, spread: float | None = None) -> str:
-    """The estimated sound speed's σ as the console says it: the whole σ a study's tags take as their fallback's
-    (``speed``: :func:`~sblsim.orchestrator.telemetry.study_clocks.estimated_speed`), the fit's (with a season's
-    windows' ``spread`` in it, where they disagree: :func:`~sblsim.models.sync.windows.season_slowness`) and the
-    survey's share in it [m/s]; or why none is taken (the survey's share not bounded); nothing without the fit's σ."""
-    if fit is None:
-        return ""
-    fitted = f"the fit's {fit:.2g}" + (f" with the windows' spread {spread:.2g}" if spread else "")
-    if speed.get("sound_speed_sigma_m_s") is None:
-        return (f", {fitted} m/s; the survey's share of its error not bounded (too few pairs of a sync tag and "
-                "another receiver): a study's tags keep the default's")
-    return (f", σ {speed['sound_speed_sigma_m_s']:.2g} m/s ({fitted}, the survey's share "
-            f"{speed['sound_speed_survey_sigma_m_s']:.2g})")
-
-
 def main(args: argparse.Namespace) -> int:
     """``sblsim sync`` from its parsed arguments: its lines printed, its exit status returned."""
     speed = None if args.sound_speed is None else real_argument(args.sound_speed, "--sound-speed", *SOUND_SPEED,
@@ -236,7 +221,6 @@ def main(args: argparse.Namespace) -> int:
     window = real_argument(args.window_days, "--window-days", *WINDOW_DAYS_RANGE, "days")
     from sblsim.orchestrator.sync.outputs import write
     from sblsim.orchestrator.sync.study_sync import synchronise_files
-    from sblsim.orchestrator.telemetry.study_clocks import estimated_speed
 
     outcome = synchronise_files(args.detections, args.receivers, args.format, speed, args.sound_speed_file, hours,
                                 args.reference, args.refine_positions, survey, args.crs, args.frame, window)
@@ -244,12 +228,8 @@ def main(args: argparse.Namespace) -> int:
                         "sync.json", "synchronisation")
     write(outcome, out)
     s = outcome.summary
-    d, c = s["detections"], s["sound_speed"]
-    speed_text = (f"{c['sound_speed_m_s']:.1f} m/s ({c['source']})" if "sound_speed_m_s" in c
-                  else "from the series")
-    if c.get("source") == "estimated":
-        speed_text += speed_sigma_text(estimated_speed(s), c.get("sound_speed_sigma_m_s"),
-                                       c.get("windows_spread_m_s"))
+    d = s["detections"]
+    speed_text = speed_said(s)
     print(f"sync of {args.detections}: {d['sync_arrivals']} sync-tag arrivals of {d['rows']} detections, "
           f"{len(s['synchronised'])} receivers synchronised against {s['reference_receiver']} in "
           f"{len(s['bin_edges']) - 1} bins of {s['bin_hours']:g} h, sound speed {speed_text}, in "

@@ -1,6 +1,6 @@
 """The console's line of the receivers' survey error a synchronisation's residuals show
-(:mod:`sblsim.orchestrator.sync.survey_seen`), for ``sblsim sync`` and ``sblsim track`` (light: the command line
-imports it at start)."""
+(:mod:`sblsim.orchestrator.sync.survey_seen`), for ``sblsim sync`` and ``sblsim track``, and the words of its sound
+speed (light: the command line imports it at start)."""
 
 from __future__ import annotations
 
@@ -35,4 +35,34 @@ def survey_line(seen: dict | None, stated: float | dict | None, source: str | No
             f"± {seen['survey_sigma_se_m']:.2g} m per axis ({said}; {given})")
 
 
-__all__ = ["survey_line"]
+def speed_said(summary: dict) -> str:
+    """The console's words of a synchronisation's sound speed (``summary``: its ``sync.json``'s): given, from a
+    series, or estimated with its whole σ (:func:`speed_sigma_text`)."""
+    c = summary["sound_speed"]
+    if "sound_speed_m_s" not in c:
+        return "from the series"
+    said = f"{c['sound_speed_m_s']:.1f} m/s ({c['source']})"
+    if c.get("source") != "estimated":
+        return said
+    from sblsim.orchestrator.sync.estimated_speed import estimated_speed  # (the survey error's model: scipy)
+
+    return said + speed_sigma_text(estimated_speed(summary), c.get("sound_speed_sigma_m_s"),
+                                   c.get("windows_spread_m_s"))
+
+
+def speed_sigma_text(speed: dict, fit: float | None, spread: float | None = None) -> str:
+    """The estimated sound speed's σ as the console says it: the whole σ a study's tags take as their fallback's
+    (``speed``: :func:`~sblsim.orchestrator.sync.estimated_speed.estimated_speed`), the fit's (with a season's
+    windows' ``spread`` in it, where they disagree: :func:`~sblsim.models.sync.windows.season_slowness`) and the
+    survey's share in it [m/s]; or why none is taken (the survey's share not bounded); nothing without the fit's σ."""
+    if fit is None:
+        return ""
+    fitted = f"the fit's {fit:.2g}" + (f" with the windows' spread {spread:.2g}" if spread else "")
+    if speed.get("sound_speed_sigma_m_s") is None:
+        return (f", {fitted} m/s; the survey's share of its error not bounded (too few pairs of a sync tag and "
+                "another receiver): a study's tags keep the default's")
+    return (f", σ {speed['sound_speed_sigma_m_s']:.2g} m/s ({fitted}, the survey's share "
+            f"{speed['sound_speed_survey_sigma_m_s']:.2g})")
+
+
+__all__ = ["speed_said", "speed_sigma_text", "survey_line"]

@@ -13,12 +13,12 @@ import numpy as np
 from sblsim.models.declarations import ModelError
 from sblsim.models.sync.emissions import SyncTagsUnheard
 from sblsim.models.sync.resolution import RoundingError
-from sblsim.models.sync.survey_error import Z_SEEN
 from sblsim.orchestrator.io.arguments import real_argument
 from sblsim.orchestrator.readers.deployments import Deployments
 from sblsim.orchestrator.readers.limits import MAX_HYDROPHONES, SOUND_SPEED_RANGE
 from sblsim.orchestrator.readers.receivers_file import SURVEY_SIGMA_RANGE
 from sblsim.orchestrator.sync.clocks import logged_clocks, offsets_clocks, read_clocks, read_positions, with_positions
+from sblsim.orchestrator.sync.estimated_speed import estimated_speed
 from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey, read_sync_json
@@ -108,35 +108,6 @@ def study_clocks(sync_dir: Path | None, assigned, deployments: Deployments, soun
         table, {"source": source, "receivers": int(len(table)), "not_synchronised": [], "note": note}, None
 
 
-def estimated_speed(summary: dict) -> dict:
-    """The sound speed [m/s] a synchronisation estimated with its clocks (``summary``: its ``sync.json``'s) and its
-    σ [m/s] (``study.json``'s ``clocks``: each tag's fallback, :func:`~.study_offsets.study_speed`): the fit's and
-    the survey error's share through the array's scale (:mod:`sblsim.models.sync.survey_error`,
-    ``speed_scale_sigma_per_m``), in quadrature: a position off stretches the sync tags' ranges, which the speed
-    takes; the fit's σ alone does not count it. The survey error is the one taken (``survey_sigma_m``; each
-    receiver's: their RMS), else the one seen, else the most the residuals' test could have missed
-    (:data:`~sblsim.models.sync.survey_error.Z_SEEN` standard errors); where neither that nor the scale is
-    determined (too few pairs), the σ is None: the speed is said, not taken. Nothing (an empty dict) where the speed
-    was given or the fit has no σ."""
-    speed = summary.get("sound_speed") or {}
-    fit = speed.get("sound_speed_sigma_m_s")
-    if speed.get("source") != "estimated" or fit is None:
-        return {}
-    c = float(speed["sound_speed_m_s"])
-    seen = summary.get("survey_error") or {}
-    taken = summary.get("survey_sigma_m")  # (each receiver's: their RMS)
-    if isinstance(taken, dict):
-        taken = float(np.sqrt(np.mean(np.square(list(taken.values())))))
-    elif taken is None and seen.get("seen"):
-        taken = seen.get("survey_sigma_m")
-    elif taken is None and seen.get("survey_sigma_se_m") is not None:  # what the test could have missed
-        taken = Z_SEEN * float(seen["survey_sigma_se_m"])
-    scale = seen.get("speed_scale_sigma_per_m") if taken else 0.0
-    share = None if taken is None or scale is None else c * float(taken) * float(scale)
-    return {"sound_speed_m_s": c, "sound_speed_sigma_m_s": None if share is None else float(np.hypot(fit, share)),
-            "sound_speed_survey_sigma_m_s": share}
-
-
 def folder_speed(folder: Path, read: tuple[dict | None, str] | None = None) -> dict:
     """The sound speed a synchronisation's ``folder`` (``--sync DIR``) estimated and its σ, as :func:`estimated_speed`
     gives them where the synchronisation is made here, from its ``sync.json`` read as anyone's
@@ -190,5 +161,5 @@ def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict
     return float(info["survey_sigma_m"]) if info.get("survey_sigma_from") == "seen" else None
 
 
-__all__ = ["GIVEN", "NO_SYNC_TAG", "SYNCHRONISED_HERE", "TOO_COARSE", "UNHEARD", "estimated_speed", "folder_speed",
+__all__ = ["GIVEN", "NO_SYNC_TAG", "SYNCHRONISED_HERE", "TOO_COARSE", "UNHEARD", "folder_speed",
            "study_clocks", "taken_survey"]

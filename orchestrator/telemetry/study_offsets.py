@@ -300,21 +300,21 @@ def study_speed(info: dict[str, Any]) -> tuple[float, float] | None:
     fallback in place of the default's (:func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage`): its σ the
     fit's with the most a tag's own calibration is taken at (:data:`~sblsim.models.tracking.calibration.MAX_SIGMA`,
     in quadrature: one speed for the season, and the sync tags' paths near the bottom, stand for the water a tag's
-    pings crossed no better than the weakest calibration); None otherwise, or where that σ is not below the
-    default's."""
-    fitted = info.get("source") in (FITTED, SYNCHRONISED_HERE, GIVEN)
-    sigma = info.get("sound_speed_sigma_m_s") if fitted else None
+    pings crossed no better than the weakest calibration; a season's windows' own σ where they rescale each tag's
+    arrivals, ``sound_speed_windows_sigma_m_s``); None otherwise, or where that σ is not below the default's."""
+    fitted = info.get("source") in (FITTED, SYNCHRONISED_HERE, GIVEN)  # (a season's windows: each tag rescaled)
+    sigma = info.get("sound_speed_windows_sigma_m_s", info.get("sound_speed_sigma_m_s")) if fitted else None
     sigma = None if sigma is None else float(np.hypot(sigma, MAX_SIGMA))
     return None if sigma is None or not sigma < fallback_prior()[1] else (float(info["sound_speed_m_s"]), sigma)
 
 
 def fitted_options(info: dict[str, Any], moving: bool) -> dict[str, Any]:
-    """A tag's tracking options from the study's clocks fitted (``info``: ``study.json``'s ``clocks``): a
-    moving tag's ``clocks_interpolated`` (:func:`interpolated`: clocks fitted from the tags' pings) and every tag's
-    ``study_speed`` (:func:`study_speed`: from the pings or the sync tags, here or in a folder given), each where
-    there is one; none for clocks taken as logged."""
-    bent, speed = interpolated(info) if moving else [], study_speed(info)
-    return ({"clocks_interpolated": bent} if bent else {}) | ({"study_speed": speed} if speed else {})
+    """A tag's tracking options from the study's clocks fitted (``info``: ``study.json``'s ``clocks``), each where
+    there is one (none for clocks taken as logged): a moving tag's ``clocks_interpolated`` (:func:`interpolated`),
+    every tag's ``study_speed`` (:func:`study_speed`) and a season's ``study_speed_series`` (its windows' speeds)."""
+    bent, speed, windows = interpolated(info) if moving else [], study_speed(info), info.get("sound_speed_windows")
+    return ({"clocks_interpolated": bent} if bent else {}) | ({"study_speed": speed} if speed else {}) | (
+        {"study_speed_series": windows} if speed and windows else {})
 
 
 def held_heights(matrix, water: dict[str, Any] | None, c: float, sigma: float,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -234,8 +234,6 @@ def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, pa
     ModelError
         The series' times do not overlap the pings' first arrivals (one line).
     """
-    from sblsim.models.receiver import toa_tracking as tt
-
     first = ps.first_arrivals(toa)
     span = (np.nanmin(first), np.nanmax(first)) if np.isfinite(first).any() else (np.nan, np.nan)
     inside = (series[:, 0] >= span[0]) & (series[:, 0] <= span[1])
@@ -245,8 +243,7 @@ def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, pa
                          f"{span[1]:.10g}] s; allowed: a series on the times of arrival's time base (toa.txt "
                          "from sblsim toa: seconds since its origin_epoch_s)")
     c = float(np.median(series[inside, 1] if inside.any() else series[:, 1]))
-    emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, sigma_toa)[1])
-    scaled, speeds, outside = ss.rescale_to_reference(toa, emissions, series, c)
+    scaled, speeds, outside = _rescaled(toa, positions, series, c, sigma_toa)
     return scaled, c, {"sound_speed_m_s": c, "source": "measured series", "file": str(path),
                        "method": "each ping's arrivals rescaled from the series' speed at its emission to the "
                                  "series' median over the record",
@@ -256,5 +253,35 @@ def _series_speed(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, pa
                        "series_time_s": [float(series[0, 0]), float(series[-1, 0])]}
 
 
+def _rescaled(toa: np.ndarray, positions: np.ndarray, series: np.ndarray, c: float, sigma_toa: float | np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each ping's arrivals rescaled from ``series``' speed (k, 2) [s, m/s] at its emission (its single-ping fix's
+    at ``c``, :func:`~sblsim.models.tracking.sound_speed.emission_estimates`) to ``c`` [m/s]
+    (:func:`~sblsim.models.tracking.sound_speed.rescale_to_reference`): the times, each ping's speed and whether it
+    lies outside the series."""
+    from sblsim.models.receiver import toa_tracking as tt
+
+    emissions = ss.emission_estimates(toa, tt.fix_pings(toa, positions, c, sigma_toa)[1])
+    return ss.rescale_to_reference(toa, emissions, series, c)
+
+
+def season_rescaled(toa: np.ndarray, positions: np.ndarray, windows: Sequence[Sequence[float]], time_origin: float,
+                    c: float, sigma_toa: float | np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+    """A tag's arrivals rescaled from the water's speed at each ping, as a season's synchronisation found it window by
+    window (``windows``: each window's middle [s since 1970 UTC] and speed [m/s], in time order:
+    :func:`~sblsim.orchestrator.sync.estimated_speed.estimated_speed`; linear between the middles, held beyond), to
+    the season's ``c`` [m/s], which the tag's calibration or fallback then takes: one speed for a season whose water
+    changed by more than its windows' σ would scale every range by the change. ``time_origin`` [s since 1970 UTC] the
+    times of arrival's zero; ``sigma_toa`` [s] their timing noise in the pings' fixes. Returns the times (m, n) [s]
+    and what was done (``summary.json``'s ``sound_speed.season_windows``)."""
+    series = np.asarray(windows, float) - np.array([time_origin, 0.0])
+    scaled, speeds, _ = _rescaled(toa, positions, series, c, sigma_toa)
+    heard = np.isfinite(speeds)
+    return scaled, {"windows": len(series), "season_m_s": c,
+                    "range_m_s": [float(speeds[heard].min()), float(speeds[heard].max())] if heard.any() else None,
+                    "method": "each ping's arrivals rescaled from the synchronisation's windows' speed at its "
+                              "emission (linear between the windows' middles) to the season's"}
+
+
 __all__ = ["REPLACED_SOURCE", "SPEED_CHECK_SIGMAS", "TEMPERATURE_SOURCE", "Water", "replaced_line",
-           "sound_speed_stage", "speed_check"]
+           "season_rescaled", "sound_speed_stage", "speed_check"]

@@ -47,7 +47,7 @@ from sblsim.orchestrator.tracks.depth import (
 from sblsim.orchestrator.tracks.outcome import SCORE_KEYS, TrackOutcome
 from sblsim.orchestrator.tracks.row_flags import flag_interpolated, flag_rows, reason_counts
 from sblsim.orchestrator.tracks.scoring import LAG_RANGE_S, score
-from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, sound_speed_stage
+from sblsim.orchestrator.tracks.speed import TEMPERATURE_SOURCE, Water, season_rescaled, sound_speed_stage
 from sblsim.orchestrator.tracks.thinning import _usable, drop_detections
 from sblsim.orchestrator.tracks.tracker import (
     DEPTH_SIGMA,
@@ -84,7 +84,8 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
           temperature_path: Path | None = None, water_depth: float | None = None,
           force_interval: bool = False, survey_covariance: tuple[Sequence[str], np.ndarray] | None = None,
           clocks_interpolated: Sequence[tuple[float, float]] = (),
-          study_speed: tuple[float, float] | None = None) -> TrackOutcome:
+          study_speed: tuple[float, float] | None = None,
+          study_speed_series: Sequence[Sequence[float]] | None = None) -> TrackOutcome:
     """Read, thin, track and score (module docstring); the sound speed as
     :func:`~sblsim.orchestrator.tracks.speed.sound_speed_stage` takes ``sound_speed``, ``sound_speed_path``,
     ``temperature`` and ``salinity``; the tag's depth as :func:`~sblsim.orchestrator.tracks.depth.tag_depth` takes
@@ -114,7 +115,9 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     reason, listed in ``set_aside``), a stated interval the rows contradict as a whole refused unless
     ``force_interval``; a row in one of ``clocks_interpolated`` ((start, end) [s since 1970 UTC]: the clocks linear
     across a stretch of too few pings, :mod:`.row_flags`) flagged ``clocks_interpolated``; ``study_speed`` the
-    study's own speed and its σ [m/s] as the sound speed's fallback (:func:`~.speed.sound_speed_stage`)."""
+    study's own speed and its σ [m/s] as the sound speed's fallback (:func:`~.speed.sound_speed_stage`), each ping's
+    arrivals first rescaled to it from ``study_speed_series`` (a season's windows' speeds where they differ:
+    :func:`~.speed.season_rescaled`) where no speed, series or temperature is given and ``time_origin`` is."""
     import pandas as pd
 
     from sblsim.models.receiver import toa_tracking as tt
@@ -168,9 +171,14 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
     # (receivers.csv's clock_sigma_s, clock_mean_sigma_s, rounding_sigma_s): a still tag's verdict's and place's terms
     clock_sigma, clock_mean, rounding = (None if v is None else v[[receivers.names.index(n) for n in names]]
                                          for v in (receivers.clock_sigma, receivers.clock_mean, receivers.rounding))
+    season = None
+    if study_speed and study_speed_series and time_origin is not None and sound_speed is None and \
+            sound_speed_path is None and temperature is None and temperature_path is None:  # the season's water
+        toa, season = season_rescaled(toa, positions, study_speed_series, time_origin, study_speed[0], sigma)
     toa, c, speed = sound_speed_stage(toa, positions, sound_speed, sound_speed_path, temperature, salinity, depth,
                                       depth_sigma, time_origin, sigma_toa=sigma, temperature_path=temperature_path,
                                       water=water, still=motion == "stationary", study_speed=study_speed)
+    speed |= {"season_windows": season} if season else {}
     if fixed_depth is not None:  # one depth given: against where the arrivals put the tag with its depth free, at a
         # speed the given depth did not calibrate
         free_c = c if speed["source"] in ("given", "measured series", TEMPERATURE_SOURCE) else sound_speed_stage(
@@ -188,10 +196,11 @@ def track(toa_path: Path, receivers_path: Path, truth_path: Path | None = None, 
                                                                                                    water_depth)
         if sound_speed is None and sound_speed_path is None and temperature_path is None:  # calibrated from the
             # pings (or fallen back where they could not be fitted): again with the prior; the times of arrival as
-            # read (none rescaled)
+            # read (or as the season's windows rescaled them)
             toa, c, speed = sound_speed_stage(toa, positions, None, None, temperature, salinity, depth, depth_sigma,
                                               sigma_toa=sigma, water=water, still=motion == "stationary",
                                               study_speed=study_speed)
+            speed |= {"season_windows": season} if season else {}
         fx, fe, fc, fused, fchi2 = tt.fix_pings(toa, positions, c, sigma, depth=depth, depth_sigma=depth_sigma)
     trusted = qa.trusted_fixes(fx, fc, fused.sum(axis=1), np.isfinite(toa).sum(axis=1), fchi2, dim,
                                None if depth is None else np.isfinite(depth))

@@ -14,9 +14,10 @@ import pytest
 from sblsim.models.sync.survey_error import Z_SEEN
 from sblsim.models.tracking.calibration import MAX_SIGMA
 from sblsim.models.tracking.sound_speed import fallback_prior
-from sblsim.orchestrator.commands.sync import speed_sigma_text
+from sblsim.orchestrator.sync.estimated_speed import estimated_speed
+from sblsim.orchestrator.sync.survey_console import speed_sigma_text
 from sblsim.orchestrator.telemetry.simulate import simulate_study
-from sblsim.orchestrator.telemetry.study_clocks import SYNCHRONISED_HERE, estimated_speed
+from sblsim.orchestrator.telemetry.study_clocks import SYNCHRONISED_HERE
 from sblsim.orchestrator.telemetry.study_offsets import fitted_options, study_speed
 
 WATER = 1480.0  # [m/s] the simulation's sound speed
@@ -65,14 +66,15 @@ def test_the_speed_a_synchronisation_estimated_and_its_sigma():
     assert study_speed(info | {"sound_speed_sigma_m_s": np.sqrt(default**2 - MAX_SIGMA**2) * 0.999}) is not None
 
 
-def _study(tmp_path, seed: int, moved: float = 0.0, receivers: int = 4, tags: int = 3, days: float = 0.25):
-    """A simulated GLATOS study with its sync tags (``receivers``, ``tags`` animals, ``days``), each deployment's
-    position off by ``moved`` [m per axis, σ], run through the CLI: the simulation, the study's folder and its
-    ``study.json``."""
+def _study(tmp_path, seed: int, moved: float = 0.0, receivers: int = 4, tags: int = 3, days: float = 0.25,
+           water=WATER):
+    """A simulated GLATOS study with its sync tags (``receivers``, ``tags`` animals, ``days``, the ``water``'s sound
+    speed), each deployment's position off by ``moved`` [m per axis, σ], run through the CLI: the simulation, the
+    study's folder and its ``study.json``."""
     from sblsim.orchestrator import cli
 
     sim = simulate_study(n_receivers=receivers, n_tags=tags, days=days, redeployed=0, seed=seed, offset=0.01,
-                         drift=1e-7)
+                         drift=1e-7, sound_speed=water)
     files = sim.write(tmp_path / "in", "glatos")
     if moved:
         sheet = pd.read_csv(files["deployments"], dtype=str, keep_default_na=False)
@@ -214,3 +216,61 @@ def test_a_folder_s_speed_out_of_its_range_is_refused_in_one_line(tmp_path, fiel
     assert folder_speed(tmp_path) == {}
     (tmp_path / "sync.json").unlink()
     assert folder_speed(tmp_path) == {}
+
+
+def test_a_season_s_windows_rescale_each_tag_s_arrivals_to_the_season_s_speed():
+    """``season_series``: each window's middle and speed where the windows' spread is above 0 (nothing where they
+    agree), its σ the windows' largest and the survey's share in quadrature; a tag's options carry the series with
+    the study's speed at that σ (and MAX_SIGMA). ``season_rescaled``: pings from four receivers in water whose speed
+    runs linearly between two windows' middles, rescaled to the season's speed, are the times of arrival that speed
+    would give (each ping's own emission and distances, against a computation here), to a few microseconds."""
+    from sblsim.orchestrator.sync.estimated_speed import season_series
+    from sblsim.orchestrator.tracks.speed import season_rescaled
+
+    origin = 1.7e9
+    summary = {"sound_speed": {"windows_spread_m_s": 9.0},
+               "windows": {"edges": [origin, origin + 1000.0, origin + 3000.0], "sound_speed_m_s": [1470.0, 1480.0],
+                           "sound_speed_sigma_m_s": [0.05, 0.12]}}
+    found = season_series(summary, 0.5)
+    assert found["sound_speed_windows"] == [[origin + 500.0, 1470.0], [origin + 2000.0, 1480.0]]
+    assert found["sound_speed_windows_sigma_m_s"] == pytest.approx(np.hypot(0.12, 0.5))
+    assert season_series(summary | {"sound_speed": {"windows_spread_m_s": 0.0}}, 0.5) == {}
+    info = {"source": SYNCHRONISED_HERE, "sound_speed_m_s": 1475.0, "sound_speed_sigma_m_s": 7.0} | found
+    options = fitted_options(info, True)
+    assert options["study_speed"] == pytest.approx((1475.0, np.hypot(np.hypot(0.12, 0.5), MAX_SIGMA)))
+    assert options["study_speed_series"] == found["sound_speed_windows"]
+    assert "study_speed_series" not in fitted_options({"source": SYNCHRONISED_HERE, "sound_speed_m_s": 1475.0,
+                                                       "sound_speed_sigma_m_s": 7.0}, True)
+    rng = np.random.default_rng(1)
+    receivers = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 200.0], [0.0, 200.0]])
+    places = rng.uniform(20.0, 180.0, (40, 2))
+    emitted = np.sort(rng.uniform(500.0, 2000.0, 40))
+    water = 1470.0 + (emitted - 500.0) / 1500.0 * 10.0  # linear between the middles, as the series is
+    distance = np.linalg.norm(places[:, None, :] - receivers[None], axis=2)
+    toa = emitted[:, None] + distance / water[:, None]
+    scaled, said = season_rescaled(toa, receivers, found["sound_speed_windows"], origin, 1475.0, 1e-4)
+    np.testing.assert_allclose(scaled, emitted[:, None] + distance / 1475.0, rtol=0, atol=5e-6)
+    assert said["windows"] == 2 and said["season_m_s"] == 1475.0
+    assert said["range_m_s"] == pytest.approx([water.min(), water.max()], abs=0.01)
+
+
+@pytest.mark.slow
+def test_a_season_whose_water_changes_is_tracked_nearly_as_one_whose_water_does_not(tmp_path):
+    """Three simulated weeks of six receivers, two animals, in water running 1,470 → 1,500 → 1,470 m/s against the
+    same weeks in water at its mean (1,485 m/s): each tag's arrivals rescaled by the synchronisation's three windows'
+    speeds (``summary.json``'s ``sound_speed.season_windows``), its median error within 1.5 times the steady water's
+    (twice it with one speed for the season), NEES in [1, 4.5]."""
+    span = 21 * 86400.0
+    medians = {}
+    for name, water in (("steady", 1485.0), ("changing", lambda t: 1485.0 - 15.0 * np.cos(2 * np.pi * t / span))):
+        sim, out, study = _study(tmp_path / name, 5, receivers=6, tags=2, days=21.0, water=water)
+        for tag, rows in _errors(sim, out, study["clocks"]["reference_receiver"]).groupby("tag"):
+            medians[name, tag] = rows["error"].median()
+            said = json.loads((out / "tags" / tag / "summary.json").read_text())["sound_speed"]
+            assert ("season_windows" in said) == (name == "changing"), said
+            if name == "changing":
+                assert said["season_windows"]["windows"] == 3
+                assert 1.0 <= rows["nees"].mean() <= 4.5, (tag, rows.describe())
+    for (name, tag), median in medians.items():
+        if name == "changing":
+            assert median <= 1.5 * medians["steady", tag], medians
