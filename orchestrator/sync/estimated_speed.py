@@ -48,7 +48,7 @@ def season_series(summary: dict, share: float) -> dict:
     in quadrature); nothing otherwise."""
     windows = summary.get("windows") or {}
     speeds, sigmas = windows.get("sound_speed_m_s"), windows.get("sound_speed_sigma_m_s")
-    if not (summary["sound_speed"].get("windows_spread_m_s") or 0.0) > 0.0 or not speeds or None in sigmas:
+    if not (summary["sound_speed"].get("windows_spread_m_s") or 0.0) > 0.0 or not speeds or None in (sigmas or [None]):
         return {}
     edges = np.asarray(windows["edges"], float)
     return {"sound_speed_windows": np.c_[(edges[:-1] + edges[1:]) / 2.0, speeds].tolist(),

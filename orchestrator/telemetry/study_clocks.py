@@ -23,6 +23,8 @@ from sblsim.orchestrator.sync.run import NEVER_HEARD, synchronise
 from sblsim.orchestrator.sync.segments import NOT_SYNCHRONISED
 from sblsim.orchestrator.sync.taken_survey import folder_position_sigmas, folder_survey, read_sync_json
 
+#: The most windows a synchronisation's folder may say (a year in windows of an hour).
+MAX_WINDOWS = 10_000
 #: The clocks' source where the sync tags' times were rounded too coarsely to synchronise them.
 TOO_COARSE = "as logged (times too coarse to synchronise)"
 #: The clocks' source where the deployments' sync tags are not heard by two receivers (the detections hold none of them,
@@ -142,8 +144,42 @@ def folder_speed(folder: Path, read: tuple[dict | None, str] | None = None) -> d
         taken = {k: real_argument(v, f"{where}[{str(k)[:40]!r}]", *SURVEY_SIGMA_RANGE, "m") for k, v in taken.items()}
     elif taken is not None:
         taken = real_argument(taken, where, *SURVEY_SIGMA_RANGE, "m")
-    return estimated_speed({"sound_speed": {"source": "estimated", "sound_speed_m_s": c, "sound_speed_sigma_m_s": fit},
-                            "survey_sigma_m": taken, "survey_error": checked})
+    spread, windows = _folder_windows(data, speed, shown)
+    return estimated_speed({"sound_speed": {"source": "estimated", "sound_speed_m_s": c, "sound_speed_sigma_m_s": fit,
+                                            "windows_spread_m_s": spread},
+                            "survey_sigma_m": taken, "survey_error": checked, "windows": windows})
+
+
+def _folder_windows(data: dict, speed: dict, shown: str) -> tuple[float | None, dict | None]:
+    """A season's windows' speeds in a folder's ``sync.json`` (``data``; its ``sound_speed`` ``speed``), each number
+    checked in its range (:func:`folder_speed`): the windows' spread [m/s] and their edges [s since 1970 UTC], speeds
+    and σ [m/s]; None, None where it has none.
+
+    Raises
+    ------
+    ModelError
+        A number outside its range, edges not increasing or not one more than the speeds (one line naming it).
+    """
+    windows = data.get("windows")
+    if not isinstance(windows, dict) or speed.get("windows_spread_m_s") is None or "sound_speed_m_s" not in windows:
+        return None, None
+    low, high = SOUND_SPEED_RANGE
+    spread = real_argument(speed["windows_spread_m_s"], f"{shown} sound_speed.windows_spread_m_s", 0.0, high - low,
+                           "m/s")
+    where = f"{shown} windows"
+    each = [windows.get(k) if isinstance(windows.get(k), list) else [] for k in
+            ("edges", "sound_speed_m_s", "sound_speed_sigma_m_s")]
+    if not 2 <= len(each[0]) <= MAX_WINDOWS + 1 or len(each[1]) != len(each[0]) - 1 or len(each[2]) != len(each[1]):
+        raise ModelError(f"{where}: {len(each[0])} edges, {len(each[1])} speeds and {len(each[2])} sigmas; allowed: "
+                         f"one more edge than speeds and sigmas, at most {MAX_WINDOWS} windows")
+    edges = [real_argument(v, f"{where}.edges", 0.0, 1e11, "s") for v in each[0]]
+    if not all(b > a for a, b in zip(edges, edges[1:])):
+        raise ModelError(f"{where}.edges: not increasing; allowed: the windows' edges in time order")
+    return spread, {"edges": edges,
+                    "sound_speed_m_s": [real_argument(v, f"{where}.sound_speed_m_s", low, high, "m/s")
+                                        for v in each[1]],
+                    "sound_speed_sigma_m_s": [None if v is None else real_argument(
+                        v, f"{where}.sound_speed_sigma_m_s", 0.0, high - low, "m/s") for v in each[2]]}
 
 
 def taken_survey(stated: float | None, refine: bool, info: dict) -> float | dict[str, float] | None:

@@ -274,3 +274,37 @@ def test_a_season_whose_water_changes_is_tracked_nearly_as_one_whose_water_does_
     for (name, tag), median in medians.items():
         if name == "changing":
             assert median <= 1.5 * medians["steady", tag], medians
+
+
+@pytest.mark.parametrize("change, says", [
+    (None, None),
+    ({"edges": [1.7e9 + 1000.0, 1.7e9, 1.7e9 + 3000.0]}, "windows.edges: not increasing"),
+    ({"sound_speed_m_s": [1470.0, 1e9]}, "windows.sound_speed_m_s: 1000000000.0 is outside the allowed range"),
+    ({"sound_speed_sigma_m_s": [0.05]}, "2 speeds and 1 sigmas"),
+    ({"edges": [1.7e9 + k for k in range(20_002)]}, "at most 10000 windows"),
+])
+def test_a_folder_s_season_windows_are_taken_as_one_made_here_or_refused(tmp_path, change, says):
+    """A synchronisation's folder of a season whose windows' speeds differ (``sync.json``'s ``windows`` and
+    ``sound_speed.windows_spread_m_s``) gives each tag the same windows' series and σ as
+    :func:`~sblsim.orchestrator.sync.estimated_speed.estimated_speed` gives a study synchronised here from the same
+    summary; its windows' numbers out of their ranges refused in one line naming the field."""
+    from sblsim.models.declarations import ModelError
+    from sblsim.orchestrator.telemetry.study_clocks import folder_speed
+
+    windows = {"edges": [1.7e9, 1.7e9 + 1000.0, 1.7e9 + 3000.0], "sound_speed_m_s": [1470.0, 1480.0],
+               "sound_speed_sigma_m_s": [0.05, 0.12], "count": 2}
+    data = {"sound_speed": {"source": "estimated", "sound_speed_m_s": 1475.0, "sound_speed_sigma_m_s": 5.0,
+                            "windows_spread_m_s": 7.0},
+            "survey_sigma_m": 1.0, "survey_error": {"speed_scale_sigma_per_m": 0.001}, "windows": windows}
+    bad = json.loads(json.dumps(data))
+    bad["windows"] |= change or {}
+    (tmp_path / "sync.json").write_text(json.dumps(bad, indent=1))  # (as sblsim writes it: a number a line)
+    if says is None:
+        found, made = folder_speed(tmp_path), estimated_speed(data)
+        assert found.keys() == made.keys() and len(found["sound_speed_windows"]) == 2
+        for key, value in made.items():
+            assert np.asarray(found[key]) == pytest.approx(np.asarray(value), rel=1e-12), key
+        return
+    with pytest.raises(ModelError, match="sync.json") as refused:
+        folder_speed(tmp_path)
+    assert says in str(refused.value) and "\n" not in str(refused.value)
