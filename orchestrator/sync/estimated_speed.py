@@ -12,13 +12,14 @@ from sblsim.models.sync.survey_error import Z_SEEN
 
 def estimated_speed(summary: dict) -> dict:
     """The sound speed [m/s] a synchronisation estimated with its clocks (``summary``: its ``sync.json``'s) and its
-    σ [m/s] (``study.json``'s ``clocks``: each tag's fallback, :func:`~.study_offsets.study_speed`): the fit's and
-    the survey error's share through the array's scale (:mod:`sblsim.models.sync.survey_error`,
-    ``speed_scale_sigma_per_m``), in quadrature: a position off stretches the sync tags' ranges, which the speed
-    takes; the fit's σ alone does not count it. The survey error is the one taken (``survey_sigma_m``; each
-    receiver's: their RMS), else the one seen, else the most the residuals' test could have missed
-    (:data:`~sblsim.models.sync.survey_error.Z_SEEN` standard errors); where neither that nor the scale is
-    determined (too few pairs), the σ is None: the speed is said, not taken. Nothing (an empty dict) where the speed
+    σ [m/s] (``study.json``'s ``clocks``: each tag's fallback,
+    :func:`~sblsim.orchestrator.telemetry.study_offsets.study_speed`): the fit's and the survey error's share
+    through the array's scale (:mod:`sblsim.models.sync.survey_error`, ``speed_scale_sigma_per_m``), in quadrature:
+    a position off stretches the sync tags' ranges, which the speed takes; the fit's σ alone does not count it. The
+    survey error is the one taken (``survey_sigma_m``; each receiver's: their RMS), else the one seen, else the most
+    the residuals' test could have missed (:data:`~sblsim.models.sync.survey_error.Z_SEEN` standard errors); where
+    neither that nor the scale is determined (too few pairs), the σ is None: the speed is said, not taken. A
+    season's windows' own speeds where they differ (:func:`season_series`). Nothing (an empty dict) where the speed
     was given or the fit has no σ."""
     speed = summary.get("sound_speed") or {}
     fit = speed.get("sound_speed_sigma_m_s")

@@ -61,8 +61,11 @@ def speed_sigma_text(speed: dict, fit: float | None, spread: float | None = None
     if speed.get("sound_speed_sigma_m_s") is None:
         return (f", {fitted} m/s; the survey's share of its error not bounded (too few pairs of a sync tag and "
                 "another receiver): a study's tags keep the default's")
+    windows = speed.get("sound_speed_windows")
     return (f", σ {speed['sound_speed_sigma_m_s']:.2g} m/s ({fitted}, the survey's share "
-            f"{speed['sound_speed_survey_sigma_m_s']:.2g})")
+            f"{speed['sound_speed_survey_sigma_m_s']:.2g})") + (
+        f"; a study's tags rescaled by the {len(windows)} windows' own speeds, σ "
+        f"{speed['sound_speed_windows_sigma_m_s']:.2g} m/s" if windows else "")
 
 
 __all__ = ["speed_said", "speed_sigma_text", "survey_line"]

@@ -180,4 +180,4 @@ def test_a_season_whose_water_changes_gives_each_window_its_speed_and_the_season
     assert speed["sound_speed_sigma_m_s"] >= 0.7 * truth.std() / np.sqrt(windows["count"]), speed
     assert speed["windows_spread_m_s"] == pytest.approx(truth.std(), rel=0.2), speed
     assert max(windows["sound_speed_sigma_m_s"]) < 0.05 * speed["sound_speed_sigma_m_s"]
-    assert "with the windows' spread" in said
+    assert "with the windows' spread" in said and f"rescaled by the {windows['count']} windows' own speeds" in said
