@@ -401,13 +401,19 @@ def _slowness(fits) -> tuple[float | None, float | None, np.ndarray | None]:
     values = [(f.slowness, f.slowness_sigma) for _, _, f in fits if f.slowness is not None]
     if not values:
         return None, None, None
-    s = np.array([v for v, _ in values], float)
-    sigma = np.array([np.nan if e is None else e for _, e in values], float)
-    each = np.c_[s, sigma]
-    if not (np.isfinite(sigma) & (sigma > 0)).all():
-        return float(s.mean()), None, each
-    mean, spread, _ = season_slowness(s, sigma)
+    each = np.array([(v, np.nan if e is None else e) for v, e in values], float)
+    mean, spread, _ = windows_slowness(each)
     return mean, spread, each
+
+
+def windows_slowness(each: np.ndarray) -> tuple[float, float | None, float | None]:
+    """The season's slowness from its windows' (``each``: (W, 2) [s/m] each window's slowness and sigma, NaN where
+    none): :func:`season_slowness`'s mean, sigma and spread τ; their plain mean and None, None where a window gives
+    no sigma."""
+    s, sigma = each[:, 0], each[:, 1]
+    if not (np.isfinite(sigma) & (sigma > 0)).all():
+        return float(s.mean()), None, None
+    return season_slowness(s, sigma)
 
 
 def season_slowness(values: np.ndarray, sigma: np.ndarray) -> tuple[float, float, float]:
@@ -440,4 +446,5 @@ def season_slowness(values: np.ndarray, sigma: np.ndarray) -> tuple[float, float
     return float(np.sum(random * values) / random.sum()), float(random.sum() ** -0.5), float(np.sqrt(tau2))
 
 
-__all__ = ["OVERLAP_HOURS", "WINDOW_DAYS", "Windows", "fit_in_windows", "season_slowness", "season_windows"]
+__all__ = ["OVERLAP_HOURS", "WINDOW_DAYS", "Windows", "fit_in_windows", "season_slowness", "season_windows",
+           "windows_slowness"]

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from sblsim.models.sync.clock_fit import ClockFit
-from sblsim.models.sync.windows import season_slowness
+from sblsim.models.sync.windows import windows_slowness
 from sblsim.orchestrator.sync import segments
 
 #: A sync arrival's ``reason`` in the residuals (``residuals.csv``), by its code: kept (empty), or why not.
@@ -81,9 +81,9 @@ def _summary(fit, names, tag_names, receiver, tag, used, duplicate, single, link
     elif speed_source == "estimated":
         speed["sound_speed_m_s"] = 1.0 / fit.slowness
         speed["sound_speed_sigma_m_s"] = fit.slowness_sigma / fit.slowness ** 2 if fit.slowness_sigma else None
-        each = fit.window_slowness
-        if each is not None and np.isfinite(each).all() and (each[:, 1] > 0).all():  # a season's windows
-            speed["windows_spread_m_s"] = season_slowness(each[:, 0], each[:, 1])[2] / fit.slowness ** 2
+        tau = None if fit.window_slowness is None else windows_slowness(fit.window_slowness)[2]  # a season's
+        if tau is not None:
+            speed["windows_spread_m_s"] = tau / fit.slowness ** 2
     loo = {}
     if len(sync_tags):
         inside = sync_tags[sync_tags["inside_array"]]
